@@ -1,0 +1,87 @@
+"""The runtime API shared by every backend: names, parameters and input checks."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from .model import Model
+
+
+class SingularMassMatrixError(np.linalg.LinAlgError):
+    """The mass matrix is singular or not positive definite at the given state."""
+
+
+class DynamicsInfo:
+    """Names and parameter handling, mixed into every backend's dynamics object."""
+
+    model: Model
+    backend: str
+
+    @property
+    def coordinates(self) -> list[str]:
+        return self.model.coordinates
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        return dict(self.model.parameters)
+
+    @property
+    def n(self) -> int:
+        return self.model.dof
+
+    def parameter_vector(self, p=None) -> np.ndarray:
+        """Full parameter array in `parameters` order from None, a dict of overrides or an array."""
+        defaults = self.model.parameter_vector()
+        if p is None:
+            return defaults
+        if isinstance(p, Mapping):
+            names = list(self.model.parameters)
+            out = defaults.copy()
+            for key, value in p.items():
+                try:
+                    out[names.index(key)] = float(value)
+                except ValueError:
+                    raise KeyError(f"unknown parameter '{key}' (parameters: {', '.join(names)})") \
+                        from None
+            return out
+        arr = np.asarray(p, dtype=float)
+        if arr.shape != defaults.shape:
+            raise ValueError(f"p must be None, a dict of overrides or an array of "
+                             f"{defaults.size} parameters in dyn.parameters order; got shape {arr.shape}")
+        return np.ascontiguousarray(arr)
+
+    def __repr__(self) -> str:
+        return (f"<gagen dynamics '{self.model.name}' backend={self.backend} "
+                f"coordinates={self.coordinates}>")
+
+
+def as_states(n: int, *arrays, names: tuple[str, ...]) -> tuple[list[np.ndarray], bool]:
+    """Check and convert inputs of shape (n,) or stacked (N, n); say whether they were stacked."""
+    out = []
+    stacked_shape = None
+    for name, a in zip(names, arrays):
+        arr = _as_float_array(a, name)
+        if arr.ndim == 1 and arr.shape[0] == n:
+            pass
+        elif arr.ndim == 2 and arr.shape[1] == n:
+            if stacked_shape is not None and arr.shape[0] != stacked_shape:
+                raise ValueError(f"{name} has {arr.shape[0]} rows, other inputs have {stacked_shape}")
+            stacked_shape = arr.shape[0]
+        else:
+            raise ValueError(f"{name} must have shape ({n},) or (N, {n}); got {arr.shape}")
+        out.append(arr)
+    stacked = stacked_shape is not None
+    if stacked:
+        out = [np.broadcast_to(a, (stacked_shape, n)) if a.ndim == 1 else a for a in out]
+    return out, stacked
+
+
+def _as_float_array(a, name: str) -> np.ndarray:
+    if isinstance(a, (str, bytes)) or a is None:
+        raise TypeError(f"{name} must be an array of numbers, got {type(a).__name__}")
+    arr = np.asarray(a)
+    if arr.dtype == object or arr.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+    return arr.astype(float, copy=False)

@@ -1,0 +1,117 @@
+/*
+ * gagen: generic ODE integrators and robot controllers (plain C99).
+ *
+ * Everything here is reentrant: no globals, no static mutable state, no
+ * malloc.  The caller provides all scratch memory, so the same code can run
+ * inside Python (through Cython) and inside an embedded control loop.
+ *
+ * Error codes: the integrators return 0 on success.  Their own failures are
+ * the negative GAGEN_ERR_* codes below; a nonzero code returned by the
+ * right-hand side (or by the model's fd/id) is passed through unchanged, so
+ * model code should use positive codes to stay distinguishable.
+ */
+#ifndef GAGEN_INTEGRATOR_H
+#define GAGEN_INTEGRATOR_H
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define GAGEN_OK 0
+#define GAGEN_ERR_STEP_TOO_SMALL (-101) /* step size fell below 10 ulp(t) */
+#define GAGEN_ERR_MAX_STEPS (-102)      /* max_steps step attempts used up */
+#define GAGEN_ERR_BAD_ARG (-103)        /* invalid argument (NULL, unsorted t_eval, ...) */
+
+/* Right-hand side dy/dt = f(t, y).  Returns 0 on success, or a nonzero error
+ * code that aborts the integration and becomes the integrator's status. */
+typedef int (*gagen_ode_fn)(void *ctx, double t, const double *y, double *dydt);
+
+typedef struct {
+    long nfev;      /* right-hand side evaluations (same count as scipy's nfev) */
+    long nsteps;    /* step attempts = naccepted + nrejected */
+    long naccepted; /* accepted steps (scipy: len(sol.t) - 1 without t_eval) */
+    long nrejected; /* rejected step attempts */
+    int status;     /* same value as the function's return value */
+} gagen_ode_stats;
+
+/*
+ * Dormand-Prince 5(4) with exactly the step-size control of
+ * scipy.integrate.solve_ivp(method="RK45"): same tableau, RMS error norm with
+ * scale atol_i + rtol*max(|y_i|, |y_new_i|), SAFETY=0.9, MIN_FACTOR=0.2,
+ * MAX_FACTOR=10, error exponent -1/5, growth capped at 1 after a rejection,
+ * scipy's select_initial_step when first_step <= 0, FSAL, rtol raised to
+ * 100*DBL_EPSILON like scipy.  max_step <= 0 or inf means unbounded.
+ * max_steps <= 0 means unlimited step attempts.
+ *
+ * t1 < t0 integrates backwards.  t_eval must be monotone in the direction of
+ * integration and lie within [t0, t1]; values are produced with scipy's RK45
+ * dense output (quartic interpolant, scipy's P matrix), except that points
+ * coinciding with a step end (including t0 and t1) get the exact step value.
+ * y_out is n_eval*n, row-major.  On failure, rows not reached are set to NaN.
+ * stats may be NULL.
+ */
+int gagen_dopri5(gagen_ode_fn f, void *ctx, int n, double t0, double t1, const double *y0,
+                 double rtol, const double *atol, double first_step, double max_step,
+                 long max_steps, const double *t_eval, int n_eval, double *y_out,
+                 double *work, gagen_ode_stats *stats);
+long gagen_dopri5_work_size(int n); /* in doubles */
+
+/*
+ * Classical fixed-step RK4 with step h > 0 (direction taken from t1 - t0);
+ * the last step is shortened to land exactly on t1.  Values at t_eval are
+ * cubic Hermite interpolants over the containing step (y and f at both ends),
+ * which keeps the output fourth-order accurate.
+ */
+int gagen_rk4(gagen_ode_fn f, void *ctx, int n, double t0, double t1, const double *y0,
+              double h, const double *t_eval, int n_eval, double *y_out, double *work,
+              gagen_ode_stats *stats);
+long gagen_rk4_work_size(int n); /* in doubles */
+
+/* ---- robot controllers ------------------------------------------------ */
+
+/* Model functions supplied by the generated code.  Return 0 or an error code
+ * (e.g. singular mass matrix). */
+typedef int (*gagen_fd_fn)(const double *q, const double *qd, const double *tau,
+                           const double *p, double *qdd);
+typedef int (*gagen_id_fn)(const double *q, const double *qd, const double *qdd,
+                           const double *p, double *tau);
+
+#define GAGEN_CTRL_NONE 0
+#define GAGEN_CTRL_PD 1
+#define GAGEN_CTRL_COMPUTED_TORQUE 2
+
+typedef struct {
+    int n;
+    gagen_fd_fn fd;
+    gagen_id_fn id;
+    const double *p;
+    int kind;                 /* GAGEN_CTRL_* */
+    const double *kp, *kd;    /* per-joint gains, length n; NULL means zero */
+    const double *target;     /* PD target q, length n; NULL means zero */
+    int gravity_compensation; /* PD: add id(q, 0, 0) when nonzero */
+    /* Reference trajectory (paper eq. 11) for computed torque. */
+    const double *traj_q0, *traj_qf;
+    double traj_Tp;
+    double *scratch; /* caller-provided, at least 4*n doubles */
+} gagen_robot_ctx;
+
+/* gagen_ode_fn for y = [q, qd]: tau = controller(t, q, qd), qdd = fd(q, qd, tau). */
+int gagen_robot_rhs(void *ctx, double t, const double *y, double *dydt);
+
+/* PD:       tau = -kp*(q - target) - kd*qd [+ id(q, 0, 0)]
+ * computed: tau = id(q, qd, qdd_r + kd*(qd_r - qd) + kp*(q_r - q))
+ * Uses c->scratch[n..4n), so tau may point to c->scratch[0..n). */
+int gagen_controller_torque(gagen_robot_ctx *c, double t, const double *q, const double *qd,
+                            double *tau);
+
+/* Eq. 11: q_r(t) = q0 + (qf - q0)/Tp * (t - Tp/(2 pi) sin(2 pi t/Tp)) on [0, Tp],
+ * held at q0 for t < 0 and at qf for t > Tp (zero velocity and acceleration).
+ * qd and qdd may be NULL. */
+void gagen_eq11(const double *q0, const double *qf, double Tp, int n, double t, double *q,
+                double *qd, double *qdd);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* GAGEN_INTEGRATOR_H */

@@ -1,0 +1,388 @@
+"""Independent numerical references for checking the symbolic Gibbs-Appell derivation.
+
+Everything here is plain numpy and deliberately takes a different route from a
+body-frame symbolic derivation: poses, velocities, accelerations, forces and inertias
+are all expressed in the WORLD frame, and the dynamics come from a recursive
+Newton-Euler pass. A second, fully external reference is built with pinocchio.
+
+Conventions (shared with gagen.model):
+- each body's frame is its joint frame; the joint origin (R0, xyz0) places the joint
+  frame in the parent's frame; a revolute/continuous joint then rotates by q about its
+  (normalized) axis, a prismatic joint translates by q along it; fixed joints have no q;
+- coordinates are the moving bodies' joints in body order;
+- the generalized force of a joint is the torque (revolute) or force (prismatic) that the
+  parent applies to the child along the joint axis;
+- potential energy is V = -sum_i m_i g . r_Ci (world positions, zero at the world origin),
+  summed over ALL bodies, including those rigidly fixed to the world.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import sympy as sp
+
+if TYPE_CHECKING:
+    from gagen.model import Model
+
+
+@dataclass(frozen=True)
+class NumericBody:
+    name: str
+    parent: int  # index into NumericModel.bodies, -1 for the world
+    joint_type: str  # "revolute", "continuous", "prismatic" or "fixed"
+    origin_R: np.ndarray  # 3x3, joint frame orientation in the parent frame
+    origin_xyz: np.ndarray  # (3,), joint frame origin in the parent frame
+    axis: np.ndarray  # (3,), unit axis in the joint (= body) frame
+    mass: float
+    com: np.ndarray  # (3,), mass centre in the body frame
+    inertia: np.ndarray  # 3x3 central inertia in the body frame
+    coordinate: int | None  # index into q, None for a fixed joint
+
+    @property
+    def rotates(self) -> bool:
+        return self.joint_type in ("revolute", "continuous")
+
+
+@dataclass(frozen=True)
+class NumericModel:
+    bodies: tuple[NumericBody, ...]
+    gravity: np.ndarray  # (3,), world frame
+    coordinates: tuple[str, ...]
+
+    @property
+    def dof(self) -> int:
+        return len(self.coordinates)
+
+    def welded_to_world(self) -> list[bool]:
+        """Per body: True if no moving joint lies between it and the world."""
+        welded: list[bool] = []
+        for b in self.bodies:
+            parent_welded = True if b.parent < 0 else welded[b.parent]
+            welded.append(parent_welded and b.coordinate is None)
+        return welded
+
+
+# ----------------------------------------------------------------------------- model
+
+
+def numeric_model(model: Model, p: dict[str, float] | None = None) -> NumericModel:
+    """Evaluate every sympy entry of `model` with its parameter defaults, overridden by `p`."""
+    values = {name: float(v) for name, v in model.parameters.items()}
+    if p:
+        unknown = set(p) - set(values)
+        if unknown:
+            raise KeyError(f"unknown parameter(s) {sorted(unknown)}")
+        values.update({k: float(v) for k, v in p.items()})
+    subs = {sp.Symbol(k): sp.Float(v, 30) for k, v in values.items()}
+
+    index = {b.name: i for i, b in enumerate(model.bodies)}
+    coord_index = {name: k for k, name in enumerate(model.coordinates)}
+    bodies = []
+    for b in model.bodies:
+        j = b.joint
+        axis = _array(j.axis, subs).reshape(3)
+        if j.moves:
+            # the model stores axes as given; only the direction matters
+            axis = axis / np.linalg.norm(axis)
+        bodies.append(NumericBody(
+            name=b.name,
+            parent=index.get(b.parent, -1),  # -1: the world
+            joint_type=j.type,
+            origin_R=_array(j.origin_rotation, subs).reshape(3, 3),
+            origin_xyz=_array(j.origin_xyz, subs).reshape(3),
+            axis=axis,
+            mass=float(sp.sympify(b.mass).xreplace(subs).evalf(30)),
+            com=_array(b.com, subs).reshape(3),
+            inertia=_array(b.inertia, subs).reshape(3, 3),
+            coordinate=coord_index[j.name] if j.moves else None,
+        ))
+    gravity = _array(model.gravity, subs).reshape(3)
+    return NumericModel(tuple(bodies), gravity, tuple(model.coordinates))
+
+
+def _array(matrix, subs) -> np.ndarray:
+    # evaluate with 30 digits so that e.g. cos(pi/7) in an origin is exact to double precision
+    return np.array([float(sp.sympify(e).xreplace(subs).evalf(30)) for e in matrix], dtype=float)
+
+
+# ------------------------------------------------------------------------ kinematics
+
+
+def rotation_about(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues' formula for a unit axis."""
+    k = np.asarray(axis, dtype=float)
+    K = skew(k)
+    return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def homogeneous(R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = p
+    return T
+
+
+@dataclass
+class BodyState:
+    """World-frame kinematics of one body; `origin` is its joint/body frame origin."""
+
+    T: np.ndarray  # 4x4 pose of the body frame in the world
+    axis: np.ndarray  # joint axis in the world (unit)
+    omega: np.ndarray  # angular velocity
+    alpha: np.ndarray  # angular acceleration
+    v: np.ndarray  # velocity of the frame origin
+    a: np.ndarray  # acceleration of the frame origin
+
+    @property
+    def R(self) -> np.ndarray:
+        return self.T[:3, :3]
+
+    @property
+    def origin(self) -> np.ndarray:
+        return self.T[:3, 3]
+
+
+def forward_kinematics(nm: NumericModel, q, qd=None, qdd=None) -> list[BodyState]:
+    """Poses, velocities and accelerations of every body in the world frame."""
+    q = np.asarray(q, dtype=float)
+    qd = np.zeros(nm.dof) if qd is None else np.asarray(qd, dtype=float)
+    qdd = np.zeros(nm.dof) if qdd is None else np.asarray(qdd, dtype=float)
+    world = BodyState(np.eye(4), np.zeros(3), *(np.zeros(3) for _ in range(4)))
+    states: list[BodyState] = []
+    for b in nm.bodies:
+        parent = world if b.parent < 0 else states[b.parent]
+        states.append(_child_state(b, parent, q, qd, qdd))
+    return states
+
+
+def _child_state(b: NumericBody, parent: BodyState, q, qd, qdd) -> BodyState:
+    # joint frame before the motion, as a 4x4 transform chained in the world
+    T_joint = parent.T @ homogeneous(b.origin_R, b.origin_xyz)
+    axis_w = T_joint[:3, :3] @ b.axis
+    k = b.coordinate
+    x, xd, xdd = (0.0, 0.0, 0.0) if k is None else (q[k], qd[k], qdd[k])
+    if b.rotates:
+        T = T_joint @ homogeneous(rotation_about(b.axis, x), np.zeros(3))
+    elif b.joint_type == "prismatic":
+        T = T_joint @ homogeneous(np.eye(3), b.axis * x)
+    else:
+        T = T_joint
+    # origin relative to the parent's origin; the axis is fixed in the parent, so its
+    # world derivative is omega_parent x axis (source of the Coriolis terms below)
+    r = T[:3, 3] - parent.origin
+    w_p, al_p = parent.omega, parent.alpha
+    v = parent.v + np.cross(w_p, r)
+    a = parent.a + np.cross(al_p, r) + np.cross(w_p, np.cross(w_p, r))
+    omega, alpha = w_p.copy(), al_p.copy()
+    if b.rotates:
+        omega = w_p + axis_w * xd
+        alpha = al_p + np.cross(w_p, axis_w) * xd + axis_w * xdd
+    elif b.joint_type == "prismatic":
+        v = v + axis_w * xd
+        a = a + 2.0 * np.cross(w_p, axis_w) * xd + axis_w * xdd
+    return BodyState(T, axis_w, omega, alpha, v, a)
+
+
+def com_world(b: NumericBody, s: BodyState) -> np.ndarray:
+    return s.origin + s.R @ b.com
+
+
+# -------------------------------------------------------------------------- dynamics
+
+
+def rnea(nm: NumericModel, q, qd, qdd, gravity: np.ndarray | None = None) -> np.ndarray:
+    """Generalized forces that produce accelerations qdd at (q, qd) (world-frame Newton-Euler).
+
+    `gravity` overrides the model's gravity (the mass matrix uses zero gravity).
+    """
+    g = nm.gravity if gravity is None else np.asarray(gravity, dtype=float)
+    states = forward_kinematics(nm, q, qd, qdd)
+    # f: force the parent applies to the body; n: moment of it about the body's origin
+    f = [np.zeros(3) for _ in nm.bodies]
+    n = [np.zeros(3) for _ in nm.bodies]
+    for i, (b, s) in enumerate(zip(nm.bodies, states)):
+        F, N_c = _inertial_wrench(b, s, g)
+        f[i] += F
+        n[i] += N_c + np.cross(com_world(b, s) - s.origin, F)
+    tau = np.zeros(nm.dof)
+    for i in reversed(range(len(nm.bodies))):
+        b, s = nm.bodies[i], states[i]
+        if b.coordinate is not None:
+            tau[b.coordinate] = s.axis @ (n[i] if b.rotates else f[i])
+        if b.parent >= 0:
+            # the child's load acts on the parent; move its moment to the parent's origin
+            p = b.parent
+            f[p] += f[i]
+            n[p] += n[i] + np.cross(s.origin - states[p].origin, f[i])
+    return tau
+
+
+def _inertial_wrench(b: NumericBody, s: BodyState, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Net force and moment about the mass centre the body needs, minus gravity's share."""
+    rc = s.R @ b.com
+    a_c = s.a + np.cross(s.alpha, rc) + np.cross(s.omega, np.cross(s.omega, rc))
+    I_w = s.R @ b.inertia @ s.R.T
+    F = b.mass * (a_c - g)
+    N = I_w @ s.alpha + np.cross(s.omega, I_w @ s.omega)
+    return F, N
+
+
+def mass_matrix(nm: NumericModel, q) -> np.ndarray:
+    """Columns of rnea with unit accelerations, zero velocity and zero gravity."""
+    zero = np.zeros(nm.dof)
+    cols = [rnea(nm, q, zero, e, gravity=np.zeros(3)) for e in np.eye(nm.dof)]
+    M = np.array(cols).T
+    return 0.5 * (M + M.T)
+
+
+def bias_forces(nm: NumericModel, q, qd) -> np.ndarray:
+    """Coriolis, centrifugal and gravity forces: rnea with zero acceleration."""
+    return rnea(nm, q, qd, np.zeros(nm.dof))
+
+
+def forward_dynamics(nm: NumericModel, q, qd, tau) -> np.ndarray:
+    return np.linalg.solve(mass_matrix(nm, q), np.asarray(tau, dtype=float) - bias_forces(nm, q, qd))
+
+
+def energy(nm: NumericModel, q, qd) -> tuple[float, float]:
+    """(kinetic, potential) with V = -sum m g . r_C over all bodies."""
+    states = forward_kinematics(nm, q, qd)
+    kinetic = potential = 0.0
+    for b, s in zip(nm.bodies, states):
+        rc = s.R @ b.com
+        v_c = s.v + np.cross(s.omega, rc)
+        I_w = s.R @ b.inertia @ s.R.T
+        kinetic += 0.5 * b.mass * (v_c @ v_c) + 0.5 * (s.omega @ I_w @ s.omega)
+        potential -= b.mass * (nm.gravity @ (s.origin + rc))
+    return float(kinetic), float(potential)
+
+
+# ------------------------------------------------------------------------- pinocchio
+#
+# Pinocchio's computePotentialEnergy returns -sum_i m_i g . c_i with g = model.gravity
+# .linear and c_i the world mass centre of the inertia attached to joint i: the SAME sign
+# and zero (world origin) as energy() above. It sums over joints 1..njoints only, so
+# mass appended to the universe joint 0 (bodies welded to the world) is left out: the
+# two differ by the constant  -sum_{welded} m g . r_C  (see welded_potential()).
+
+
+def pin_model(nm: NumericModel) -> Any:
+    """A pinocchio Model with the same tree, inertias and gravity as `nm`.
+
+    Pinocchio's algorithms (crba in particular) need its joints in depth-first order,
+    which our parents-first body order need not be. So the joints are added depth-first
+    and `pm.gagen_order[k]` is our coordinate index of pinocchio's k-th velocity; the
+    pin_* helpers below take and return vectors in OUR order.
+    """
+    import pinocchio as pin
+
+    pm = pin.Model()
+    # per body: the pinocchio joint carrying it and its frame's placement in that joint
+    joint_of: dict[int, int] = {}
+    placement: dict[int, Any] = {}
+    order: list[int] = []
+    for i in _depth_first(nm):
+        b = nm.bodies[i]
+        parent_joint = 0 if b.parent < 0 else joint_of[b.parent]
+        parent_place = pin.SE3.Identity() if b.parent < 0 else placement[b.parent]
+        origin = parent_place * pin.SE3(b.origin_R, b.origin_xyz)
+        if b.coordinate is None:
+            joint_id, body_place = parent_joint, origin
+        else:
+            joint = (pin.JointModelRevoluteUnaligned(b.axis) if b.rotates
+                     else pin.JointModelPrismaticUnaligned(b.axis))
+            joint_id = pm.addJoint(parent_joint, joint, origin, nm.coordinates[b.coordinate])
+            body_place = pin.SE3.Identity()
+            order.append(b.coordinate)
+        pm.appendBodyToJoint(joint_id, pin.Inertia(b.mass, b.com, b.inertia), body_place)
+        joint_of[i], placement[i] = joint_id, body_place
+    pm.gravity = pin.Motion(np.asarray(nm.gravity, dtype=float), np.zeros(3))
+    # every joint has nq = nv = 1, so one permutation maps q, qd, qdd and tau alike
+    assert pm.nq == pm.nv == nm.dof
+    pm.gagen_order = np.array(order, dtype=int)
+    return pm
+
+
+def _depth_first(nm: NumericModel) -> list[int]:
+    children: dict[int, list[int]] = {}
+    for i, b in enumerate(nm.bodies):
+        children.setdefault(b.parent, []).append(i)
+    visit: list[int] = []
+    stack = list(reversed(children.get(-1, [])))
+    while stack:
+        i = stack.pop()
+        visit.append(i)
+        stack.extend(reversed(children.get(i, [])))
+    return visit
+
+
+def _to_pin(pm: Any, *vectors) -> list[np.ndarray]:
+    return [np.ascontiguousarray(np.asarray(v, dtype=np.float64)[pm.gagen_order])
+            for v in vectors]
+
+
+def _from_pin(pm: Any, vector) -> np.ndarray:
+    out = np.empty(pm.nv)
+    out[pm.gagen_order] = np.asarray(vector)
+    return out
+
+
+def welded_potential(nm: NumericModel) -> float:
+    """Potential energy of the bodies welded to the world (which pinocchio leaves out)."""
+    states = forward_kinematics(nm, np.zeros(nm.dof))
+    return float(-sum(b.mass * (nm.gravity @ com_world(b, s))
+                      for b, s, w in zip(nm.bodies, states, nm.welded_to_world()) if w))
+
+
+def pin_mass_matrix(pm: Any, q) -> np.ndarray:
+    import pinocchio as pin
+
+    M = np.array(pin.crba(pm, pm.createData(), *_to_pin(pm, q)))
+    # crba fills only the upper triangle
+    M = np.triu(M) + np.triu(M, 1).T
+    out = np.empty_like(M)
+    out[np.ix_(pm.gagen_order, pm.gagen_order)] = M
+    return out
+
+
+def pin_rnea(pm: Any, q, qd, qdd) -> np.ndarray:
+    import pinocchio as pin
+
+    return _from_pin(pm, pin.rnea(pm, pm.createData(), *_to_pin(pm, q, qd, qdd)))
+
+
+def pin_forward_dynamics(pm: Any, q, qd, tau) -> np.ndarray:
+    import pinocchio as pin
+
+    return _from_pin(pm, pin.aba(pm, pm.createData(), *_to_pin(pm, q, qd, tau)))
+
+
+def pin_energy(pm: Any, q, qd) -> tuple[float, float]:
+    """(kinetic, potential) as pinocchio defines them (potential without welded bodies)."""
+    import pinocchio as pin
+
+    data = pm.createData()
+    q, qd = _to_pin(pm, q, qd)
+    kinetic = pin.computeKineticEnergy(pm, data, q, qd)
+    potential = pin.computePotentialEnergy(pm, data, q)
+    return float(kinetic), float(potential)
+
+
+def pin_dynamics(pm: Any, q, qd, tau) -> dict[str, Any]:
+    """Everything pinocchio says about the state: M, bias, qdd, kinetic, potential."""
+    kinetic, potential = pin_energy(pm, q, qd)
+    return {
+        "M": pin_mass_matrix(pm, q),
+        "bias": pin_rnea(pm, q, qd, np.zeros(pm.nv)),
+        "qdd": pin_forward_dynamics(pm, q, qd, tau),
+        "kinetic": kinetic,
+        "potential": potential,
+    }
+
