@@ -19,8 +19,17 @@ import sympy as sp
 
 from .merge import merge_fixed_joints, symmetric
 from .model import (
-    JOINT_TYPES, WORLD, ZERO3, Body, Joint, Limits, Model, ModelError, check_inertia,
-    rotation_from_rpy, vector,
+    JOINT_TYPES,
+    WORLD,
+    ZERO3,
+    Body,
+    Joint,
+    Limits,
+    Model,
+    ModelError,
+    check_inertia,
+    rotation_from_rpy,
+    vector,
 )
 
 GRAVITY = 9.81
@@ -309,15 +318,18 @@ def _parameterize(model: Model) -> Model:
         if _is_zero(body.mass) and all(_is_zero(e) for e in body.inertia):
             bodies.append(body)  # massless: nothing to tune, keep plain zeros
             continue
-        names = _body_parameters(body)
-        parameters.update(names)
-        s = {name: sp.Symbol(name) for name in names}
-        link = body.name
-        inertia = sp.ImmutableMatrix(3, 3, lambda r, c: s[_inertia_name(r, c, link)])
-        bodies.append(replace(body, mass=s[f"m_{link}"],
-                              com=vector([s[f"c{a}_{link}"] for a in "xyz"]), inertia=inertia))
+        values = _body_parameters(body)
+        parameters.update(values)
+        bodies.append(_symbolic_body(body))
     return Model(name=model.name, bodies=tuple(bodies), parameters=parameters,
                  gravity=model.gravity, source=model.source, description=model.description)
+
+
+def _symbolic_body(body: Body) -> Body:
+    link = body.name
+    inertia = sp.ImmutableMatrix(3, 3, lambda r, c: sp.Symbol(_inertia_name(r, c, link)))
+    return replace(body, mass=sp.Symbol(f"m_{link}"),
+                   com=vector([sp.Symbol(f"c{a}_{link}") for a in "xyz"]), inertia=inertia)
 
 
 def _body_parameters(body: Body) -> dict[str, float]:

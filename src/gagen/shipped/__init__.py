@@ -1,0 +1,1 @@
+"""Extension modules compiled at install time from the repository's `generated/` sources."""
