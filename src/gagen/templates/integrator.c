@@ -279,8 +279,8 @@ int gagen_dopri5(gagen_ode_fn f, void *ctx, int n, double t0, double t1, const d
                 if (error_norm == 0)
                     factor = GAGEN_DP_MAX_FACTOR;
                 else
-                    factor = gagen_pymin(GAGEN_DP_MAX_FACTOR,
-                                         GAGEN_DP_SAFETY * pow(error_norm, GAGEN_DP_ERROR_EXPONENT));
+                    factor = gagen_pymin(GAGEN_DP_MAX_FACTOR, GAGEN_DP_SAFETY *
+                                         pow(error_norm, GAGEN_DP_ERROR_EXPONENT));
                 if (step_rejected) factor = gagen_pymin(1, factor);
                 h_abs *= factor;
                 break;
