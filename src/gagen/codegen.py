@@ -19,6 +19,7 @@ from pathlib import Path
 import jinja2
 import sympy as sp
 from sympy.printing.c import C99CodePrinter
+from sympy.printing.precedence import PRECEDENCE
 
 from . import __version__
 from .gibbs_appell import Equations
@@ -53,12 +54,12 @@ class GagenCPrinter(C99CodePrinter):
     def _print_Pow(self, expr):
         base, exp = expr.args
         if exp.is_Integer and 2 <= int(exp) <= 4:
-            b = self.parenthesize(base, 1000)  # atoms stay bare, sums get parentheses
+            b = self.parenthesize(base, PRECEDENCE["Mul"])  # atoms and calls stay bare
             return "*".join([b] * int(exp))
         if exp == -1:
-            return f"1.0/{self.parenthesize(base, 1000)}"
+            return f"1.0/{self.parenthesize(base, PRECEDENCE['Mul'])}"
         if exp.is_Integer and -4 <= int(exp) <= -2:
-            b = self.parenthesize(base, 1000)
+            b = self.parenthesize(base, PRECEDENCE["Mul"])
             return "1.0/(" + "*".join([b] * -int(exp)) + ")"
         return super()._print_Pow(expr)
 
@@ -153,14 +154,21 @@ def _dependency_order(assignments: list[Assignment]) -> list[Assignment]:
     return order
 
 
+def _comment_safe(text) -> str:
+    """Text that cannot end a C comment early, whatever the user's names."""
+    return str(text).replace("*/", "* /").replace("\n", " ")
+
+
 def template_environment() -> jinja2.Environment:
-    return jinja2.Environment(
+    env = jinja2.Environment(
         loader=jinja2.PackageLoader("gagen", "templates"),
         keep_trailing_newline=True,
         trim_blocks=True,
         lstrip_blocks=True,
         undefined=jinja2.StrictUndefined,
     )
+    env.filters["comment"] = _comment_safe
+    return env
 
 
 def templates_digest() -> str:
@@ -236,7 +244,7 @@ def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
     }
     for name in ("integrator.c", "integrator.h"):
         text = resources.files("gagen").joinpath("templates/" + name).read_text()
-        files[name] = f"/* {context['header']} (copied from gagen's templates) */\n" + text
+        files[name] = f"/* {_comment_safe(context['header'])} (copied from gagen's templates) */\n" + text
     return GeneratedCode(files=files, ops_before=cse.ops_before, ops_after=cse.ops_after,
                          cse_seconds=cse.seconds, module_name=module_name, ident=ident)
 
