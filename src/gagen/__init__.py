@@ -7,5 +7,13 @@ from .model import Model, ModelError
 
 __version__ = "0.1.0"
 
-__all__ = ["Equations", "Model", "ModelError", "SingularMassMatrixError", "derive", "load",
-           "resolve_model", "__version__"]
+__all__ = [
+           "Equations",
+           "Model",
+           "ModelError",
+           "SingularMassMatrixError",
+           "__version__",
+           "derive",
+           "load",
+           "resolve_model",
+]

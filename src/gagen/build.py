@@ -160,7 +160,7 @@ def compile_sources(folder: Path, module_name: str, flags: list[str], verbose: b
     """Cythonize and compile the sources in `folder` in a subprocess; return the module path."""
     check_compiler()
     proc = subprocess.run([sys.executable, "-c", _BUILD_SCRIPT, module_name, " ".join(flags)],
-                          cwd=folder, capture_output=True, text=True)
+                          cwd=folder, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
         raise BuildError(f"compiling {module_name} in {folder} failed:\n{proc.stdout}\n{proc.stderr}")
     if verbose and proc.stderr.strip():

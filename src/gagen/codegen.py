@@ -26,9 +26,12 @@ from .gibbs_appell import Equations
 
 TEMPLATE_FILES = ("header.h.j2", "mass_matrix.c.j2", "rhs.c.j2", "inverse_dynamics.c.j2",
                   "wrapper.pyx.j2", "integrator.c", "integrator.h")
-_C_KEYWORDS = set("""auto break case char const continue default do double else enum extern
-float for goto if inline int long register restrict return short signed sizeof static struct
-switch typedef union unsigned void volatile while _Bool _Complex _Imaginary""".split())
+_C_KEYWORDS = frozenset({
+    "auto", "break", "case", "char", "const", "continue", "default", "do", "double", "else",
+    "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register",
+    "restrict", "return", "short", "signed", "sizeof", "static", "struct", "switch", "typedef",
+    "union", "unsigned", "void", "volatile", "while", "_Bool", "_Complex", "_Imaginary",
+})
 
 
 def c_identifier(name: str, fallback: str = "model") -> str:

@@ -16,8 +16,14 @@ from dataclasses import dataclass, field
 
 import sympy as sp
 
-from .kinematics import (BodyKinematics, CoordinateSymbols, Recorder, axis_rotation,
-                         derive_kinematics, unit_axis)
+from .kinematics import (
+    BodyKinematics,
+    CoordinateSymbols,
+    Recorder,
+    axis_rotation,
+    derive_kinematics,
+    unit_axis,
+)
 from .model import Model
 
 

@@ -70,6 +70,8 @@ def inertia_matrix(ixx, iyy, izz, ixy=0, ixz=0, iyz=0) -> sp.ImmutableMatrix:
 
 IDENTITY = sp.ImmutableMatrix(sp.eye(3))
 ZERO3 = sp.ImmutableMatrix(sp.zeros(3, 1))
+ZERO33 = sp.ImmutableMatrix(sp.zeros(3, 3))
+ZERO = sp.Integer(0)
 
 
 @dataclass(frozen=True)
@@ -108,9 +110,9 @@ class Body:
     name: str
     parent: str
     joint: Joint
-    mass: sp.Expr = sp.Integer(0)
+    mass: sp.Expr = ZERO
     com: sp.ImmutableMatrix = ZERO3
-    inertia: sp.ImmutableMatrix = sp.ImmutableMatrix(sp.zeros(3, 3))
+    inertia: sp.ImmutableMatrix = ZERO33
 
 
 @dataclass(frozen=True)

@@ -10,10 +10,20 @@ from typing import Any
 
 import sympy as sp
 import yaml
-from sympy.parsing.sympy_parser import parse_expr, standard_transformations
+from sympy.parsing.sympy_parser import TokenError, parse_expr, standard_transformations
 
-from .model import JOINT_TYPES, WORLD, Body, Joint, Limits, Model, ModelError
-from .model import inertia_matrix, rotation_from_rpy, vector
+from .model import (
+    JOINT_TYPES,
+    WORLD,
+    Body,
+    Joint,
+    Limits,
+    Model,
+    ModelError,
+    inertia_matrix,
+    rotation_from_rpy,
+    vector,
+)
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -82,7 +92,8 @@ class _ExprParser:
         try:
             expr = parse_expr(text, local_dict=dict(self.local),
                               transformations=standard_transformations, evaluate=True)
-        except Exception as exc:  # sympy raises many types for bad syntax
+        except (SyntaxError, TokenError, TypeError, ValueError, AttributeError,
+                sp.SympifyError) as exc:  # sympy's parser raises all of these
             raise ModelError(self.source, element, f"cannot parse expression '{value}': {exc}") from None
         if not isinstance(expr, sp.Expr):
             raise ModelError(self.source, element, f"'{value}' is not an algebraic expression")
