@@ -18,6 +18,7 @@ import sysconfig
 import tempfile
 import time
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 
 from . import __version__
@@ -52,10 +53,24 @@ class BuildReport:
     cached: bool = False
 
 
-def source_key(model: Model) -> str:
-    """Hash of what the generated sources depend on: model, parameter names, gagen, templates."""
+# The modules whose code decides what the generated sources say.
+GENERATOR_MODULES = ("kinematics.py", "gibbs_appell.py", "codegen.py")
+
+
+def generator_digest() -> str:
+    """A hash of the generator's own code, so that a changed generator never reuses a build."""
     h = hashlib.sha256()
-    for part in (model.canonical(), ",".join(model.parameters), __version__, templates_digest()):
+    folder = resources.files("gagen")
+    for name in GENERATOR_MODULES:
+        h.update(folder.joinpath(name).read_bytes())
+    return h.hexdigest()
+
+
+def source_key(model: Model) -> str:
+    """Hash of what the generated sources depend on: model, parameter names, generator, templates."""
+    h = hashlib.sha256()
+    for part in (model.canonical(), ",".join(model.parameters), __version__, generator_digest(),
+                 templates_digest()):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()

@@ -57,7 +57,7 @@ cdef extern from "integrator.h" nogil:
     int gagen_controller_torque(gagen_robot_ctx *c, double t, const double *q, const double *qd,
                                 double *tau)
 
-KEY = "64902940e743250ac82ed35263e81a2c8c752b39cbb7813d35eda9ebe07ca027"
+KEY = "043c5f7c983d54cb62d1b9c63d1f048453a51663be6291a071ed185cf215d49b"
 MODEL_NAME = "rrr"
 COORDINATES = ("q1", "q2", "q3", )
 PARAMETER_NAMES = ("g", "L1", "L2", "L3", "m1", "m2", "m3", "I1x", "I1y", "I1z", "I2x", "I2y", "I2z", "I3x", "I3y", "I3z", )
