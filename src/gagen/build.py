@@ -7,6 +7,7 @@ same model never leave a half-written module that a later `load` would pick up.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib
 import importlib.util
@@ -211,7 +212,7 @@ def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
     report = BuildReport(model.name, name, final)
     progress = Progress(report, verbose)
     progress.say(f"building '{model.name}' ({model.dof} coordinates) into {final}")
-    final.parent.mkdir(parents=True, exist_ok=True)
+    created = _make_parents(final.parent)
     tmp = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=final.parent))
     try:
         generate_sources(model, tmp, progress, report)
@@ -219,9 +220,24 @@ def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
         compile_sources(tmp, name, flags, verbose)
         progress.stage("compile", time.perf_counter() - start, " ".join(flags))
         _publish(tmp, final, replace=out is not None)
+        created = []
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+        for folder in reversed(created):  # a failed build leaves no new folders behind
+            with contextlib.suppress(OSError):
+                folder.rmdir()
     return final / f"{name}{suffix}", report
+
+
+def _make_parents(folder: Path) -> list[Path]:
+    """Create a folder and its missing parents; return those created, outermost first."""
+    missing = []
+    while not folder.exists():
+        missing.append(folder)
+        folder = folder.parent
+    for path in reversed(missing):
+        path.mkdir(exist_ok=True)
+    return list(reversed(missing))
 
 
 def _publish(tmp: Path, final: Path, replace: bool) -> None:

@@ -39,12 +39,13 @@ class DynamicsInfo:
         if isinstance(p, Mapping):
             names = list(self.model.parameters)
             out = defaults.copy()
+            index = {name: k for k, name in enumerate(names)}
             for key, value in p.items():
-                try:
-                    out[names.index(key)] = float(value)
-                except ValueError:
-                    raise KeyError(f"unknown parameter '{key}' (parameters: {', '.join(names)})") \
-                        from None
+                if key not in index:
+                    raise KeyError(f"unknown parameter '{key}' (parameters: {', '.join(names)})")
+                if isinstance(value, (str, bytes)) or value is None:
+                    raise TypeError(f"parameter '{key}' must be a number, got {value!r}")
+                out[index[key]] = float(value)
             return out
         arr = np.asarray(p, dtype=float)
         if arr.shape != defaults.shape:

@@ -204,10 +204,16 @@ def _free_symbol_names(expr) -> set[str]:
 
 
 def _numeric(expr, values: dict[sp.Symbol, float], source: str, element: str) -> float:
+    """The value at the default parameters, which must be a finite real number."""
     try:
-        return float(sp.sympify(expr).xreplace(values).evalf())
-    except (TypeError, ValueError) as exc:
-        raise ModelError(source, element, f"cannot evaluate '{expr}' to a real number") from exc
+        value = complex(sp.sympify(expr).xreplace(values).evalf())
+    except (TypeError, ValueError):
+        raise ModelError(source, element, f"cannot evaluate '{expr}' to a number") from None
+    if value.imag != 0:
+        raise ModelError(source, element, f"'{expr}' is not real")
+    if not math.isfinite(value.real):
+        raise ModelError(source, element, f"'{expr}' is not finite at the default parameters")
+    return value.real
 
 
 def _validate(model: Model) -> None:
@@ -232,6 +238,8 @@ def _validate(model: Model) -> None:
                              + " (declare them under 'parameters')")
 
     check_symbols(model.gravity, "gravity")
+    for entry in model.gravity:
+        _numeric(entry, values, src, "gravity")
     coords: dict[str, str] = {}
     for b in model.bodies:
         j = b.joint
@@ -247,13 +255,20 @@ def _validate(model: Model) -> None:
             if j.name in coords:
                 raise ModelError(src, f"{where}, joint '{j.name}'",
                                  f"duplicate coordinate name (also used by body '{coords[j.name]}')")
-            if j.name in declared:
+            derived = {j.name, f"{j.name}_d", f"{j.name}_dd", f"tau_{j.name}"}
+            clash = sorted(derived & declared)
+            if clash:
                 raise ModelError(src, f"{where}, joint '{j.name}'",
-                                 "coordinate name clashes with a parameter of the same name")
+                                 f"clashes with a parameter: '{clash[0]}' names both a parameter "
+                                 f"and this coordinate or its rate, acceleration or torque "
+                                 f"({', '.join(sorted(derived))}); rename one of them")
             coords[j.name] = b.name
             axis = np.array([_numeric(a, values, src, f"{where}, axis") for a in j.axis])
             if not np.linalg.norm(axis) > 1e-12:
                 raise ModelError(src, f"{where}, joint '{j.name}'", "zero joint axis")
+        for label, vec in (("joint origin xyz", j.origin_xyz), ("com", b.com)):
+            for entry in vec:
+                _numeric(entry, values, src, f"{where}, {label}")
         mass = _numeric(b.mass, values, src, f"{where}, mass")
         if mass < 0 or not math.isfinite(mass):
             raise ModelError(src, f"{where}, mass", f"mass must be non-negative, got {mass:g}")

@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 import json
-import keyword
-import re
+import math
 from pathlib import Path
 from typing import Any
 
 import sympy as sp
 import yaml
-from sympy.parsing.sympy_parser import TokenError, parse_expr, standard_transformations
 
+from .expressions import ExpressionError, ExpressionParser
 from .model import (
     JOINT_TYPES,
     WORLD,
@@ -24,9 +23,6 @@ from .model import (
     rotation_from_rpy,
     vector,
 )
-
-_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-
 
 def load_model_file(path: str | Path) -> Model:
     path = Path(path)
@@ -68,41 +64,46 @@ class _ExprParser:
 
     def __init__(self, names: list[str], source: str):
         self.source = source
-        self.local = {}
-        self.aliases = []  # (name, placeholder) for names that are not Python identifiers
-        for k, name in enumerate(sorted(names, key=len, reverse=True)):
-            if _IDENT.match(name) and not keyword.iskeyword(name):
-                self.local[name] = sp.Symbol(name)
-            else:
-                placeholder = f"__gagen_param_{k}"
-                self.aliases.append((name, placeholder))
-                self.local[placeholder] = sp.Symbol(name)
+        self.parser = ExpressionParser(names)
 
     def __call__(self, value: Any, element: str) -> sp.Expr:
-        if isinstance(value, bool):
+        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
             raise ModelError(self.source, element, f"expected a number or expression, got {value!r}")
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ModelError(self.source, element, f"the value {value!r} is not finite")
         if isinstance(value, (int, float)):
             return sp.sympify(value)
-        if not isinstance(value, str):
-            raise ModelError(self.source, element, f"expected a number or expression, got {value!r}")
-        text = value
-        for name, placeholder in self.aliases:
-            text = re.sub(r"(?<![A-Za-z0-9_])" + re.escape(name) + r"(?![A-Za-z0-9_])",
-                          placeholder, text)
         try:
-            expr = parse_expr(text, local_dict=dict(self.local),
-                              transformations=standard_transformations, evaluate=True)
-        except (SyntaxError, TokenError, TypeError, ValueError, AttributeError,
-                sp.SympifyError) as exc:  # sympy's parser raises all of these
-            raise ModelError(self.source, element, f"cannot parse expression '{value}': {exc}") from None
-        if not isinstance(expr, sp.Expr):
-            raise ModelError(self.source, element, f"'{value}' is not an algebraic expression")
-        return expr
+            return self.parser.parse(value)
+        except ExpressionError as exc:
+            raise ModelError(self.source, element, f"cannot use '{value}': {exc}") from None
 
     def vec(self, value: Any, element: str, length: int = 3) -> list[sp.Expr]:
         if not isinstance(value, (list, tuple)) or len(value) != length:
             raise ModelError(self.source, element, f"expected a list of {length} entries, got {value!r}")
         return [self(v, f"{element}[{i}]") for i, v in enumerate(value)]
+
+
+def _check_keys(mapping: dict, allowed: set[str], source: str, element: str) -> None:
+    """Refuse misspelt keys: a silently ignored 'axes' would give a wrong model."""
+    extra = set(mapping) - allowed
+    if extra:
+        raise ModelError(source, element, f"unknown key(s) {', '.join(sorted(map(str, extra)))}"
+                         f" (expected: {', '.join(sorted(allowed))})")
+
+
+def _limits(raw: Any, source: str, element: str) -> Limits | None:
+    if raw is None:
+        return None
+    if not isinstance(raw, dict):
+        raise ModelError(source, element, "expected a mapping of lower, upper, effort, velocity")
+    _check_keys(raw, {"lower", "upper", "effort", "velocity"}, source, element)
+    values = {}
+    for key, value in raw.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ModelError(source, f"{element} {key}", f"expected a number, got {value!r}")
+        values[key] = float(value)
+    return Limits(**values)
 
 
 def _require(mapping: dict, key: str, source: str, element: str):
@@ -112,10 +113,7 @@ def _require(mapping: dict, key: str, source: str, element: str):
 
 
 def model_from_dict(data: dict, source: str) -> Model:
-    known = {"name", "gravity", "parameters", "bodies", "description"}
-    extra = set(data) - known
-    if extra:
-        raise ModelError(source, "", f"unknown top-level key(s) {', '.join(sorted(map(str, extra)))}")
+    _check_keys(data, {"name", "gravity", "parameters", "bodies", "description"}, source, "")
     params = data.get("parameters") or {}
     if not isinstance(params, dict):
         raise ModelError(source, "parameters", "expected a mapping of name: default value")
@@ -147,13 +145,12 @@ def _body_from_dict(raw: Any, k: int, coordinate_index: int, parse: _ExprParser,
         raise ModelError(source, f"bodies[{k}]", "expected a mapping")
     name = str(_require(raw, "name", source, f"bodies[{k}]"))
     where = f"body '{name}'"
-    extra = set(raw) - {"name", "parent", "joint", "mass", "com", "inertia"}
-    if extra:
-        raise ModelError(source, where, f"unknown key(s) {', '.join(sorted(map(str, extra)))}")
+    _check_keys(raw, {"name", "parent", "joint", "mass", "com", "inertia"}, source, where)
     parent = str(raw.get("parent", WORLD))
     rj = raw.get("joint") or {}
     if not isinstance(rj, dict):
         raise ModelError(source, f"{where}, joint", "expected a mapping")
+    _check_keys(rj, {"name", "type", "origin", "axis", "limits"}, source, f"{where}, joint")
     jtype = str(rj.get("type", "revolute"))
     if jtype not in JOINT_TYPES:
         raise ModelError(source, f"{where}, joint",
@@ -164,13 +161,13 @@ def _body_from_dict(raw: Any, k: int, coordinate_index: int, parse: _ExprParser,
     origin = rj.get("origin") or {}
     if not isinstance(origin, dict):
         raise ModelError(source, f"{where}, joint origin", "expected a mapping with xyz and rpy")
+    _check_keys(origin, {"xyz", "rpy"}, source, f"{where}, joint origin")
     xyz = parse.vec(origin.get("xyz", [0, 0, 0]), f"{where}, joint origin xyz")
     rpy = parse.vec(origin.get("rpy", [0, 0, 0]), f"{where}, joint origin rpy")
     axis = parse.vec(rj.get("axis", [0, 0, 1]), f"{where}, joint axis")
-    limits = rj.get("limits")
     joint = Joint(name=jname, type=jtype, origin_xyz=vector(xyz),
                   origin_rotation=rotation_from_rpy(*rpy), axis=vector(axis),
-                  limits=Limits(**limits) if isinstance(limits, dict) else None)
+                  limits=_limits(rj.get("limits"), source, f"{where}, joint limits"))
     mass = parse(raw.get("mass", 0), f"{where}, mass")
     com = parse.vec(raw.get("com", [0, 0, 0]), f"{where}, com")
     inertia = raw.get("inertia", [0, 0, 0, 0, 0, 0])
