@@ -85,7 +85,9 @@ def parser() -> argparse.ArgumentParser:
 
 def _command_modules():
     """Further commands, each module registering its subparsers."""
-    return []
+    from .paper import register as register_paper
+
+    return [register_paper]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -70,7 +70,7 @@ class ExpressionParser:
                 return self.symbols[node.id]
             if node.id in CONSTANTS:
                 return CONSTANTS[node.id]
-            original = dict((p, n) for n, p in self.aliases).get(node.id, node.id)
+            original = {p: n for n, p in self.aliases}.get(node.id, node.id)
             raise ExpressionError(f"undeclared symbol {original} (declare it under 'parameters')")
         if isinstance(node, ast.BinOp) and type(node.op) in _BINARY:
             return _BINARY[type(node.op)](self._convert(node.left), self._convert(node.right))

@@ -24,6 +24,7 @@ from .model import (
     vector,
 )
 
+
 def load_model_file(path: str | Path) -> Model:
     path = Path(path)
     source = str(path)
