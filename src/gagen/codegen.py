@@ -196,8 +196,13 @@ def _symbol_names(eqs: Equations, cse: CSEResult) -> dict[sp.Symbol, str]:
 
 
 def _block(cse: CSEResult, printer: GagenCPrinter, exprs: list[sp.Expr],
-           targets: list[str]) -> CodeBlock:
-    local = [(printer._names[a.symbol], printer.doprint(a.expr)) for a in cse.needed(exprs)]
+           targets: list[str], printed: dict[sp.Symbol, str]) -> CodeBlock:
+    """One function's code; `printed` keeps each assignment's C text for the other blocks."""
+    local = []
+    for a in cse.needed(exprs):
+        if a.symbol not in printed:
+            printed[a.symbol] = printer.doprint(a.expr)
+        local.append((printer._names[a.symbol], printed[a.symbol]))
     outputs = [(t, printer.doprint(e)) for t, e in zip(targets, exprs)]
     return CodeBlock(locals=local, outputs=outputs)
 
@@ -212,14 +217,16 @@ def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
     lower = [(r, s) for r in range(n) for s in range(r + 1)]
     out = cse.outputs
     mass_targets = [f"M[{r * n + s}]" for r, s in lower]
+    printed: dict[sp.Symbol, str] = {}
+    forcing_targets = [f"F[{r}]" for r in range(n)]
     blocks = {
-        "mass_matrix": _block(cse, printer, out["mass_matrix"], mass_targets),
+        "mass_matrix": _block(cse, printer, out["mass_matrix"], mass_targets, printed),
         "rhs": _block(cse, printer, out["mass_matrix"] + out["forcing"],
-                      mass_targets + [f"F[{r}]" for r in range(n)]),
-        "forcing": _block(cse, printer, out["forcing"], [f"F[{r}]" for r in range(n)]),
+                      mass_targets + forcing_targets, printed),
+        "forcing": _block(cse, printer, out["forcing"], forcing_targets, printed),
         "inverse_dynamics": _block(cse, printer, out["inverse_dynamics"],
-                                   [f"tau[{r}]" for r in range(n)]),
-        "energy": _block(cse, printer, out["energy"], ["TV[0]", "TV[1]"]),
+                                   [f"tau[{r}]" for r in range(n)], printed),
+        "energy": _block(cse, printer, out["energy"], ["TV[0]", "TV[1]"], printed),
     }
     context = {
         "model": model,

@@ -57,7 +57,7 @@ cdef extern from "integrator.h" nogil:
     int gagen_controller_torque(gagen_robot_ctx *c, double t, const double *q, const double *qd,
                                 double *tau)
 
-KEY = "043c5f7c983d54cb62d1b9c63d1f048453a51663be6291a071ed185cf215d49b"
+KEY = "5bf9a785f898806c91ac7e6ddb03ec2b1893a56df0d9a28992e0aabdce9746af"
 MODEL_NAME = "rrr"
 COORDINATES = ("q1", "q2", "q3", )
 PARAMETER_NAMES = ("g", "L1", "L2", "L3", "m1", "m2", "m3", "I1x", "I1y", "I1z", "I2x", "I2y", "I2z", "I3x", "I3y", "I3z", )
