@@ -158,17 +158,32 @@ def check_compiler() -> None:
             "pure-Python backend: gagen.load(model, backend=\"lambdify\")")
 
 
+# Runs in a subprocess inside the build folder. The model's C files compile in parallel with
+# the Cython wrapper (each is one gcc process), then setuptools links them into one module.
 _BUILD_SCRIPT = """
-import sys, numpy
-from setuptools import Extension, setup
+import sys, sysconfig, numpy
+from concurrent.futures import ThreadPoolExecutor
+from distutils.ccompiler import new_compiler
+from distutils.sysconfig import customize_compiler
 from Cython.Build import cythonize
+from setuptools import Extension
 name, flags = sys.argv[1], sys.argv[2].split()
-sources = [name + ".pyx", "mass_matrix.c", "rhs.c", "inverse_dynamics.c", "integrator.c"]
-ext = Extension(name, sources, include_dirs=[".", numpy.get_include()],
-                define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
-                extra_compile_args=flags)
-setup(name=name, ext_modules=cythonize([ext], quiet=True, language_level=3),
-      script_args=["build_ext", "--inplace", "--build-temp", "_build"])
+includes = [".", numpy.get_include(), sysconfig.get_paths()["include"]]
+macros = [("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")]
+cythonize([Extension(name, [name + ".pyx"])], quiet=True, language_level=3)
+cc = new_compiler()
+customize_compiler(cc)
+
+def compile_all(sources):
+    return cc.compile(sources, output_dir="_build", include_dirs=includes, macros=macros,
+                      extra_postargs=flags)
+
+# the wrapper on one core, the model's C files on the other
+with ThreadPoolExecutor(max_workers=2) as pool:
+    parts = list(pool.map(compile_all, [[name + ".c"], ["rhs.c", "mass_matrix.c",
+                                          "inverse_dynamics.c", "integrator.c"]]))
+cc.link_shared_object([o for part in parts for o in part],
+                      name + sysconfig.get_config_var("EXT_SUFFIX"), libraries=["m"])
 """
 
 
