@@ -63,6 +63,19 @@ def test_chain7_backends_agree(cache_dir):
     assert_backends_agree(compiled, reference, np.random.default_rng(7), states=5)
 
 
+def test_gravity_is_inverse_dynamics_at_rest(rrr):
+    rng = np.random.default_rng(9)
+    zero = np.zeros(3)
+    for dyn in rrr:
+        for _ in range(5):
+            q = rng.uniform(-3, 3, 3)
+            np.testing.assert_allclose(dyn.gravity(q), dyn.inverse_dynamics(q, zero, zero),
+                                       rtol=1e-13, atol=1e-12)
+    Q = rng.normal(size=(4, 3))
+    np.testing.assert_allclose(rrr[0].gravity(Q, {"g": 1.62}), rrr[1].gravity(Q, {"g": 1.62}),
+                               rtol=1e-12)
+
+
 def test_stacked_inputs_match_single_calls(rrr):
     dyn, _ = rrr
     rng = np.random.default_rng(4)

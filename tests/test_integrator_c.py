@@ -189,6 +189,7 @@ class RobotCtx(ctypes.Structure):
         ("n", ctypes.c_int),
         ("fd", ctypes.c_void_p),
         ("id", ctypes.c_void_p),
+        ("gravity", ctypes.c_void_p),
         ("p", c_double_p),
         ("kind", ctypes.c_int),
         ("kp", c_double_p),

@@ -502,10 +502,14 @@ int gagen_controller_torque(gagen_robot_ctx *c, double t, const double *q, const
     case GAGEN_CTRL_PD: {
         int rc;
         if (c->gravity_compensation) {
-            if (c->id == NULL) return GAGEN_ERR_BAD_ARG;
-            for (i = 0; i < n; ++i) w1[i] = 0.0;
-            /* Gravity torque = id(q, qd=0, qdd=0); one zero vector serves both. */
-            rc = c->id(q, w1, w1, c->p, w2);
+            if (c->gravity != NULL) {
+                rc = c->gravity(q, c->p, w2);
+            } else {
+                if (c->id == NULL) return GAGEN_ERR_BAD_ARG;
+                for (i = 0; i < n; ++i) w1[i] = 0.0;
+                /* Gravity torque = id(q, qd=0, qdd=0); one zero vector serves both. */
+                rc = c->id(q, w1, w1, c->p, w2);
+            }
             if (rc != 0) return rc;
         }
         for (i = 0; i < n; ++i) {

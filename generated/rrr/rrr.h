@@ -48,6 +48,8 @@ int rrr_forward_dynamics(const double *q, const double *qd, const double *tau,
 /* tau = M qdd - F(q, qd, 0): the joint torques (forces for prismatic joints) */
 void rrr_inverse_dynamics(const double *q, const double *qd, const double *qdd,
                                   const double *p, double *tau);
+/* G = the gravity torques, inverse_dynamics(q, 0, 0): what holds the robot still */
+void rrr_gravity(const double *q, const double *p, double *G);
 /* TV[0] = kinetic energy, TV[1] = potential energy (zero at the world origin) */
 void rrr_energy(const double *q, const double *qd, const double *p, double *TV);
 

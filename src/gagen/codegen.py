@@ -207,6 +207,20 @@ def _block(cse: CSEResult, printer: GagenCPrinter, exprs: list[sp.Expr],
     return CodeBlock(locals=local, outputs=outputs)
 
 
+def factor_pattern(n: int, zero: set[tuple[int, int]]) -> set[tuple[int, int]]:
+    """Entries (i, j), i > j, of the LDL^T factor that can be non-zero, fill-in included.
+
+    The unrolled factorisation skips every product with a structural zero of M, e.g. the
+    coupling between a vertical base joint and the joints of a planar arm."""
+    nonzero: set[tuple[int, int]] = set()
+    for j in range(n):
+        for i in range(j + 1, n):
+            if (i, j) not in zero or any((i, k) in nonzero and (j, k) in nonzero
+                                         for k in range(j)):
+                nonzero.add((i, j))
+    return nonzero
+
+
 def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
     """Generate the C sources, header and Cython wrapper of a model (file name -> text)."""
     model = eqs.model
@@ -227,7 +241,9 @@ def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
         "inverse_dynamics": _block(cse, printer, out["inverse_dynamics"],
                                    [f"tau[{r}]" for r in range(n)], printed),
         "energy": _block(cse, printer, out["energy"], ["TV[0]", "TV[1]"], printed),
+        "gravity": _block(cse, printer, out["gravity"], [f"G[{r}]" for r in range(n)], printed),
     }
+    zero = {(r, s) for (r, s), e in zip(lower, out["mass_matrix"]) if e == 0}
     context = {
         "model": model,
         "name": model.name,
@@ -238,6 +254,7 @@ def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
         "coordinates": model.coordinates,
         "parameters": [(k, repr(float(v))) for k, v in model.parameters.items()],
         "lower": lower,
+        "lnz": factor_pattern(n, zero),
         "blocks": blocks,
         "module_name": module_name,
         "key": key,

@@ -72,6 +72,7 @@ class Equations:
             "mass_matrix": [self.mass_matrix[r, s] for r in range(n) for s in range(r + 1)],
             "forcing": list(self.forcing),
             "inverse_dynamics": list(self.inverse_dynamics),
+            "gravity": [-g for g in self.gravity_forces],
             "energy": [self.kinetic_energy, self.potential_energy],
         }
 

@@ -41,6 +41,7 @@ class LambdifyDynamics(DynamicsInfo):
         self._forcing = self._lambdify([c.q, c.qd, c.tau, p], outs["forcing"])
         self._inverse = self._lambdify([c.q, c.qd, c.qdd, p], outs["inverse_dynamics"])
         self._energy = self._lambdify([c.q, c.qd, p], outs["energy"])
+        self._gravity = self._lambdify([c.q, p], outs["gravity"])
         n = self.n
         self._lower = np.tril_indices(n)
 
@@ -86,6 +87,11 @@ class LambdifyDynamics(DynamicsInfo):
     def inverse_dynamics(self, q, qd, qdd, p=None) -> np.ndarray:
         states, stacked = as_states(self.n, q, qd, qdd, names=("q", "qd", "qdd"))
         return self._call(self._inverse, states, p, stacked)
+
+    def gravity(self, q, p=None) -> np.ndarray:
+        """The gravity torques g(q) = inverse_dynamics(q, 0, 0)."""
+        (q,), stacked = as_states(self.n, q, names=("q",))
+        return self._call(self._gravity, [q], p, stacked)
 
     def energy(self, q, qd, p=None) -> tuple:
         states, stacked = as_states(self.n, q, qd, names=("q", "qd"))

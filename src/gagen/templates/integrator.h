@@ -75,6 +75,8 @@ typedef int (*gagen_fd_fn)(const double *q, const double *qd, const double *tau,
                            const double *p, double *qdd);
 typedef int (*gagen_id_fn)(const double *q, const double *qd, const double *qdd,
                            const double *p, double *tau);
+/* Gravity torque g(q) = id(q, 0, 0), cheaper than the full inverse dynamics. */
+typedef int (*gagen_gravity_fn)(const double *q, const double *p, double *g);
 
 #define GAGEN_CTRL_NONE 0
 #define GAGEN_CTRL_PD 1
@@ -84,11 +86,12 @@ typedef struct {
     int n;
     gagen_fd_fn fd;
     gagen_id_fn id;
+    gagen_gravity_fn gravity; /* optional: used for gravity compensation when not NULL */
     const double *p;
     int kind;                 /* GAGEN_CTRL_* */
     const double *kp, *kd;    /* per-joint gains, length n; NULL means zero */
     const double *target;     /* PD target q, length n; NULL means zero */
-    int gravity_compensation; /* PD: add id(q, 0, 0) when nonzero */
+    int gravity_compensation; /* PD: add gravity(q), or id(q, 0, 0), when nonzero */
     /* Reference trajectory (paper eq. 11) for computed torque. */
     const double *traj_q0, *traj_qf;
     double traj_Tp;

@@ -20,6 +20,7 @@ cdef extern from "rrr.h" nogil:
     void rrr_inverse_dynamics(const double *q, const double *qd, const double *qdd,
                                       const double *p, double *tau)
     void rrr_energy(const double *q, const double *qd, const double *p, double *TV)
+    void rrr_gravity(const double *q, const double *p, double *G)
 
 cdef extern from "integrator.h" nogil:
     ctypedef int (*gagen_ode_fn)(void *ctx, double t, const double *y, double *dydt)
@@ -27,6 +28,7 @@ cdef extern from "integrator.h" nogil:
                                 const double *p, double *qdd)
     ctypedef int (*gagen_id_fn)(const double *q, const double *qd, const double *qdd,
                                 const double *p, double *tau)
+    ctypedef int (*gagen_gravity_fn)(const double *q, const double *p, double *g)
     ctypedef struct gagen_ode_stats:
         long nfev, nsteps, naccepted, nrejected
         int status
@@ -34,6 +36,7 @@ cdef extern from "integrator.h" nogil:
         int n
         gagen_fd_fn fd
         gagen_id_fn id
+        gagen_gravity_fn gravity
         const double *p
         int kind
         const double *kp
@@ -57,7 +60,7 @@ cdef extern from "integrator.h" nogil:
     int gagen_controller_torque(gagen_robot_ctx *c, double t, const double *q, const double *qd,
                                 double *tau)
 
-KEY = "5bf9a785f898806c91ac7e6ddb03ec2b1893a56df0d9a28992e0aabdce9746af"
+KEY = "d2af0ba3a4c0b7094aa0080689ea1722980b81f86f4fb2ddc736c2be264ab6a0"
 MODEL_NAME = "rrr"
 COORDINATES = ("q1", "q2", "q3", )
 PARAMETER_NAMES = ("g", "L1", "L2", "L3", "m1", "m2", "m3", "I1x", "I1y", "I1z", "I2x", "I2y", "I2z", "I3x", "I3y", "I3z", )
@@ -91,6 +94,17 @@ cdef int _forward(const double *a, const double *b, const double *c, const doubl
 cdef int _energy(const double *a, const double *b, const double *c, const double *p,
                  double *out) noexcept nogil:
     rrr_energy(a, b, p, out)
+    return 0
+
+
+cdef int _gravity(const double *a, const double *b, const double *c, const double *p,
+                  double *out) noexcept nogil:
+    rrr_gravity(a, p, out)
+    return 0
+
+
+cdef int _gravity_only(const double *q, const double *p, double *out) noexcept nogil:
+    rrr_gravity(q, p, out)
     return 0
 
 
@@ -226,6 +240,10 @@ cdef class CompiledModel:
         """The joint torques (forces for prismatic joints) that give qdd."""
         return self._run(_inverse, NQ, q, qd, qdd, p, "q", "qd", "qdd")
 
+    def gravity(self, q, p=None):
+        """The gravity torques g(q) = inverse_dynamics(q, 0, 0)."""
+        return self._run(_gravity, NQ, q, None, None, p, "q", None, None)
+
     def energy(self, q, qd, p=None):
         """(kinetic, potential): floats, or arrays of shape (N,) for stacked states."""
         out = self._run(_energy, 2, q, qd, None, p, "q", "qd", None)
@@ -264,6 +282,7 @@ cdef class CompiledSimulation:
         self.ctx.n = NQ
         self.ctx.fd = _forward
         self.ctx.id = _inverse
+        self.ctx.gravity = _gravity_only
         self.ctx.p = _data(arrays[0])
         self.ctx.kind = kind
         self.ctx.kp = _data(arrays[1])
