@@ -206,6 +206,43 @@ def _inverse(args: argparse.Namespace) -> int:
     return 0
 
 
+# ------------------------------------------------------------------------------ paper
+
+
+def _paper(args: argparse.Namespace) -> int:
+    """Both of the paper's computations on rrr, then how they compare with its figures."""
+    from .cli import parser
+
+    out = Path(args.out)
+    common = ["--out", str(out)] + (["--cache-dir", args.cache_dir] if args.cache_dir else [])
+    steps = [["simulate", "rrr", *common] + (["--gif"] if args.gif else []),
+             ["inverse", "rrr", *common]]
+    for argv in steps:
+        _say(f"== python -m gagen {' '.join(argv)}")
+        step = parser().parse_args(argv)
+        code = step.run(step)
+        if code:
+            return code
+    _summarize_paper(out)
+    return 0
+
+
+def _summarize_paper(out: Path) -> None:
+    sim = np.genfromtxt(out / "simulate.csv", delimiter=",", names=True)
+    inv = np.genfromtxt(out / "inverse.csv", delimiter=",", names=True)
+    final = [math.degrees(sim[c][-1]) for c in ("q1", "q2", "q3")]
+    torques = {c: (inv[f"tau_{c}"].min(), inv[f"tau_{c}"].max()) for c in ("q1", "q2", "q3")}
+    print("\nThe paper's results, reproduced (files in " + str(out) + "):")
+    print("  Fig. 2  final q1, q2, q3: {:.1f}, {:.1f}, {:.1f} deg   (paper: about -60, -60, -30)"
+          .format(*final))
+    print("  Fig. 3  the arm's successive positions: fig3_arm.png")
+    print("  Fig. 4  T01z {:+.1f} .. {:+.1f} N m  (paper: within about +-15)".format(
+        *torques["q1"]))
+    print("          T12x {:+.1f} .. {:+.1f} N m  (paper: peaks at roughly 300-400)".format(
+        *torques["q2"]))
+    print("          T23x {:+.1f} .. {:+.1f} N m  (paper: within 200)".format(*torques["q3"]))
+
+
 # ---------------------------------------------------------------------------- parsers
 
 
@@ -280,3 +317,15 @@ def register(subparsers) -> None:
                    help="final position, degrees (metres for prismatic joints), one value or "
                    "one per coordinate; write --qf=-60,-60,-30 (default: see above)")
     p.set_defaults(run=_inverse)
+
+    p = subparsers.add_parser(
+        "paper", help="reproduce the paper: Fig. 2, 3 (direct) and Fig. 4 (inverse dynamics)",
+        description="Runs `simulate rrr` and `inverse rrr` with the paper's settings and "
+        "compares the results with the paper's figures.")
+    p.add_argument("--out", default="out/rrr", metavar="DIR",
+                   help="output folder (default: %(default)s)")
+    p.add_argument("--gif", action="store_true", help="also write an animation, arm.gif")
+    p.add_argument("--cache-dir", metavar="DIR",
+                   help="cache of compiled models (default: $GAGEN_CACHE_DIR or "
+                   "~/.cache/gagen)")
+    p.set_defaults(run=_paper)
