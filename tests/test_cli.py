@@ -46,7 +46,7 @@ def test_paper_reproduces_the_three_figures(tmp_path, cache_dir, capsys):
 def quick_start_commands() -> list[str]:
     text = (REPO / "README.md").read_text()
     section = text.split("## Quick start", 1)[1].split("\n## ", 1)[0]
-    return re.findall(r"```(?:sh|bash|console)?\n(.*?)\n```", section, flags=re.S)
+    return re.findall(r"```(?:sh|bash|console)?\n(.*?)\n```", section, flags=re.DOTALL)
 
 
 def test_readme_quick_start_has_two_commands_and_ci_runs_the_second():
@@ -59,3 +59,16 @@ def test_readme_quick_start_has_two_commands_and_ci_runs_the_second():
 
 def test_parser_builds():
     assert parser().prog == "python -m gagen"
+
+
+def test_readme_python_examples_run(cache_dir, monkeypatch, tmp_path):
+    """The API tour in the README is code that works."""
+    monkeypatch.chdir(tmp_path)
+    text = (REPO / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.DOTALL)
+    assert len(blocks) >= 2
+    namespace: dict = {}
+    for block in blocks:
+        exec(compile(block, "README.md", "exec"), namespace)  # noqa: S102 (our own README)
+    assert (tmp_path / "run.csv").exists()
+    assert namespace["tau"].shape == (501, 3)

@@ -85,9 +85,10 @@ def parser() -> argparse.ArgumentParser:
 
 def _command_modules():
     """Further commands, each module registering its subparsers."""
+    from .bench import register as register_bench
     from .paper import register as register_paper
 
-    return [register_paper]
+    return [register_paper, register_bench]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,336 @@
+"""The benchmark report: report.md (machine, method, one table per section) and PNG plots.
+
+`write_report(results, out)` takes the dict that `gagen.bench.run` also saves as
+results.json; any section may be missing (not run) or hold an "error" instead of rows.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from .simulation import format_time
+from .simulation import markdown_table as simulation_table
+
+PLOTS = {"percall": "percall.png", "batched": "batched.png", "simulation": "simulation.png",
+         "scaling": "scaling.png"}
+
+
+def _num(value, digits: int = 3) -> str:
+    """A number with `digits` significant digits, thousands separated; '—' for none/NaN."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "—"
+    if value == 0:
+        return "0"
+    decimals = max(0, digits - 1 - math.floor(math.log10(abs(value))))
+    return f"{value:,.{decimals}f}"
+
+
+def _ratio(value) -> str:
+    return _num(value, 3)
+
+
+def _duration(seconds: float) -> str:
+    minutes, sec = divmod(seconds, 60.0)
+    return f"{int(minutes)} min {sec:.0f} s" if minutes >= 1 else f"{sec:.1f} s"
+
+
+# ------------------------------------------------------------------------------ markdown
+
+
+def machine_table(m: dict) -> str:
+    cores = f"{m.get('cores')} logical cores"
+    if m.get("usable_cores") and m.get("usable_cores") != m.get("cores"):
+        cores += f", {m['usable_cores']} usable"
+    rows = [
+        ("CPU", f"{m.get('cpu')} ({cores})"),
+        ("system", f"{m.get('system')} {m.get('machine')}"),
+        ("Python", m.get("python")),
+        ("NumPy / SciPy / SymPy", f"{m.get('numpy')} / {m.get('scipy')} / {m.get('sympy')}"),
+        ("Cython", m.get("cython")),
+        ("C compiler", m.get("compiler")),
+        ("gagen", m.get("gagen")),
+        ("Pinocchio / PyDy", (f"{m.get('pinocchio') or 'not installed'} / "
+                             f"{m.get('pydy') or 'not installed'}")),
+        ("date", m.get("date")),
+    ]
+    lines = ["| machine | |", "|---|---|"]
+    lines += [f"| {key} | {value} |" for key, value in rows]
+    return "\n".join(lines)
+
+
+def percall_table(rows: list[dict], baseline: str = "gagen compiled") -> str:
+    lines = [(f"| quantity | implementation | call | median µs | IQR µs (q1–q3) "
+             f"| ratio to {baseline} |"), "|---|---|---|--:|--:|--:|"]
+    for r in rows:
+        lines.append(f"| {r['quantity']} | {r['implementation']} | `{r['call']}` "
+                     f"| {_num(r['median_us'])} | {_num(r['iqr_us'], 2)} ({_num(r['q1_us'])}–"
+                     f"{_num(r['q3_us'])}) | {_ratio(r['ratio'])} |")
+    return "\n".join(lines)
+
+
+def batched_table(rows: list[dict]) -> str:
+    backends = list(dict.fromkeys(r["backend"] for r in rows))
+    base = backends[0]
+    head = "| N | " + " | ".join(f"{b} ns/state (IQR)" for b in backends)
+    head += "".join(f" | {b} / {base}" for b in backends[1:]) + " |"
+    lines = [head, "|--:|" + "--:|" * (2 * len(backends) - 1)]
+    for count in dict.fromkeys(r["N"] for r in rows):
+        cells = {r["backend"]: r for r in rows if r["N"] == count}
+        line = f"| {count:,} | " + " | ".join(
+            f"{_num(cells[b]['ns_per_state'])} ({_num(cells[b]['iqr_ns_per_state'], 2)})"
+            if b in cells else "—" for b in backends)
+        line += "".join(f" | {_ratio(cells[b]['ratio']) if b in cells else '—'}"
+                        for b in backends[1:])
+        lines.append(line + " |")
+    return "\n".join(lines)
+
+
+def scaling_table(rows: list[dict]) -> str:
+    lines = [("| model | dof | derive s | generate s (incl. CSE) | compile s | ops before CSE "
+             "| ops after CSE | before/after | FD µs/call (IQR) |"),
+             "|---|--:|--:|--:|--:|--:|--:|--:|--:|"]
+    for r in rows:
+        cached = " (cached)" if r.get("cached") else ""
+        lines.append(f"| {r['model']}{cached} | {r['dof']} | {_num(r['derive_s'])} "
+                     f"| {_num(r['generate_s'])} | {_num(r['compile_s'])} "
+                     f"| {r['ops_before_cse']:,} | {r['ops_after_cse']:,} "
+                     f"| {_ratio(r['cse_ratio'])} | {_num(r['fd_us'])} "
+                     f"({_num(r['fd_iqr_us'], 2)}) |")
+    return "\n".join(lines)
+
+
+HOW = """\
+How: every section times its candidates in one process, interleaved: each repeat times
+every candidate once (a `timeit` loop of about {target} per sample, divided by the loop
+size), the starting candidate rotating from one repeat to the next, so a slow phase of
+the machine hits all candidates alike. Shown: the median sample, the spread as the
+interquartile range (IQR, q3 − q1, with q1–q3), and the ratio of a median to the
+baseline's median (> 1: slower than the baseline). Results are checked to agree before
+anything is timed. Per-call times are from Python, including argument checks and the
+allocation of the result. A machine's speed can drift by tens of percent between runs
+(frequency scaling, neighbours on a shared host): compare ratios rather than absolute
+times across runs; results.json holds every sample."""
+
+
+def _section(results: dict, key: str, title: str, intro: str, table, out: Path | None,
+             images: dict) -> list[str]:
+    section = results.get(key)
+    if section is None:
+        return []
+    lines = [f"## {title}", ""]
+    if intro:
+        lines += [intro, ""]
+    if section.get("error"):
+        lines += [f"**Failed:** `{section['error']}`", ""]
+        return lines
+    rows = section.get("rows") or []
+    if not rows:
+        lines += ["(nothing measured)", ""]
+        return lines
+    lines += [table(rows), ""]
+    if key in images:
+        lines += [f"![{title}]({images[key]})", ""]
+    if section.get("elapsed_s") is not None:
+        lines += [f"_Section time: {_duration(section['elapsed_s'])}._", ""]
+    return lines
+
+
+def markdown(results: dict, images: dict | None = None) -> str:
+    images = images or {}
+    settings = results.get("settings", {})
+    mode = settings.get("mode", "default")
+    command = settings.get("command", "python -m gagen bench")
+    lines = ["# gagen benchmarks", ""]
+    total = results.get("elapsed_s")
+    lines += [f"`{command}` ({mode} mode)"
+              + (f", {_duration(total)} in all." if total is not None else "."), ""]
+    lines += [machine_table(results.get("machine", {})), ""]
+    target = settings.get("target_s", 0.05)
+    lines += [HOW.format(target=f"{target * 1e3:g} ms"), ""]
+
+    build = results.get("rrr_build")
+    rrr_note = ""
+    if build:
+        stages = ", ".join(f"{k} {v:.2f} s" for k, v in build.get("stages", {}).items())
+        state = "reused from the cache" if build.get("cached") else f"built cold ({stages})"
+        rrr_note = (f" The compiled rrr module was {state}; "
+                    f"{build.get('ops_after_cse', 0):,} operations after CSE.")
+    pc = results.get("percall", {})
+    lines += _section(
+        results, "percall", "Per call on rrr (the paper's robot, 3 joints)",
+        f"One fixed state, {pc.get('repeats', '?')} interleaved repeats.{rrr_note} PyDy's rhs "
+        "returns (qd, qdd) from the Kane equations of the same robot; the naive SymPy "
+        "row lambdifies M and F with every intermediate substituted and no CSE, then "
+        "calls numpy.linalg.solve. Pinocchio's crba fills only the upper triangle.",
+        percall_table, None, images)
+    bt = results.get("batched", {})
+    lines += _section(
+        results, "batched", "Batched forward dynamics on rrr",
+        f"`dyn.forward_dynamics(q, qd, tau)` on (N, 3) arrays: time per call over N, "
+        f"{bt.get('repeats', '?')} interleaved repeats; the ratio is per N.",
+        batched_table, None, images)
+    sm = results.get("simulation", {})
+    lines += _section(
+        results, "simulation", "The paper's 5-s simulation",
+        "rrr from rest at q = 0 under `paper_controller()`, rtol = 1e-6, atol = 1e-8, 501 "
+        f"output samples; one complete `gagen.simulate(...)` call each, "
+        f"{sm.get('repeats', '?')} interleaved repeats.",
+        simulation_table, None, images)
+    pa = results.get("panda", {})
+    lines += _section(
+        results, "panda", "Per call on the Panda (7 joints, from its URDF)",
+        f"gagen compiled against Pinocchio's own URDF parse, {pa.get('repeats', '?')} "
+        "interleaved repeats; ratios to gagen compiled.", percall_table, None, images)
+    sc = results.get("scaling", {})
+    lines += _section(
+        results, "scaling", "Scaling: build and call time against the robot's size",
+        "Cold builds (SymPy's cache cleared, a fresh cache folder): derive, generate "
+        "(including CSE) and compile (Cython and the C compiler) as `gagen.build.build` "
+        "reports them; operations counted before and after CSE. FD: "
+        f"`dyn.forward_dynamics(q, qd, tau)` at a fixed state, {sc.get('repeats', '?')} "
+        "repeats, all models interleaved.", scaling_table, None, images)
+    notes = results.get("notes") or []
+    if notes:
+        lines += ["## Notes", ""] + [f"- {n}" for n in notes] + [""]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+# --------------------------------------------------------------------------------- plots
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_percall(rows: list[dict], path: Path) -> None:
+    plt = _pyplot()
+    labels = [f"{r['quantity']}: {r['implementation']}" for r in rows]
+    medians = [r["median_us"] for r in rows]
+    errors = [[r["median_us"] - r["q1_us"] for r in rows],
+              [r["q3_us"] - r["median_us"] for r in rows]]
+    colours = {"mass matrix": "tab:blue", "forward dynamics": "tab:orange",
+               "inverse dynamics": "tab:green"}
+    fig, ax = plt.subplots(figsize=(8, 0.35 * len(rows) + 1.4))
+    y = list(range(len(rows)))[::-1]
+    ax.barh(y, medians, xerr=errors, color=[colours.get(r["quantity"], "grey") for r in rows],
+            capsize=2)
+    ax.set_yticks(y, labels, fontsize=8)
+    ax.set_xscale("log")
+    ax.set_xlabel("µs per call (median, bars: q1–q3)")
+    ax.set_title("Per call on rrr, from Python")
+    for yi, m in zip(y, medians):
+        ax.text(m * 1.15, yi, _num(m), va="center", fontsize=7)
+    ax.set_xlim(min(medians) / 2, max(r["q3_us"] for r in rows) * 3)
+    ax.grid(axis="x", which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_batched(rows: list[dict], path: Path) -> None:
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for backend in dict.fromkeys(r["backend"] for r in rows):
+        mine = [r for r in rows if r["backend"] == backend]
+        ax.errorbar([r["N"] for r in mine], [r["ns_per_state"] for r in mine],
+                    yerr=[r["iqr_ns_per_state"] / 2 for r in mine], marker="o",
+                    label=backend, capsize=2)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("N (states per call)")
+    ax.set_ylabel("ns per state (median)")
+    ax.set_title("Batched forward dynamics on rrr")
+    ax.grid(which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_simulation(rows: list[dict], path: Path) -> None:
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7, 2.8))
+    y = list(range(len(rows)))[::-1]
+    medians = [r["median_s"] for r in rows]
+    errors = [[r["median_s"] - r["q1_s"] for r in rows], [r["q3_s"] - r["median_s"] for r in rows]]
+    ax.barh(y, medians, xerr=errors, color="tab:purple", capsize=2)
+    ax.set_yticks(y, [f"({r['case']}) {r['label']}" for r in rows], fontsize=8)
+    ax.set_xscale("log")
+    ax.set_xlabel("seconds per 5-s simulation (median)")
+    for yi, r in zip(y, rows):
+        ax.text(r["median_s"] * 1.15, yi, f"{format_time(r['median_s'])}, "
+                f"{r['speedup']:,.0f}x", va="center", fontsize=7)
+    ax.set_xlim(min(medians) / 2, max(r["q3_s"] for r in rows) * 6)
+    ax.grid(axis="x", which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_scaling(rows: list[dict], path: Path) -> None:
+    plt = _pyplot()
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
+    chains = [r for r in rows if r["model"].startswith("chain:")]
+    others = [r for r in rows if not r["model"].startswith("chain:")]
+    series = (("derive_s", "derive", "tab:blue"), ("generate_s", "generate (incl. CSE)",
+              "tab:orange"), ("compile_s", "compile", "tab:green"))
+    markers = "sD^v<>p*"
+    for key, label, colour in series:
+        left.plot([r["dof"] for r in chains], [r[key] for r in chains], "o-", color=colour,
+                  label=f"{label}, chain:N")
+        for k, r in enumerate(others):
+            left.plot([r["dof"]], [r[key]], markers[k % len(markers)], color=colour,
+                      markersize=8, markerfacecolor="none")
+    right.plot([r["dof"] for r in chains], [r["fd_us"] for r in chains], "o-",
+               color="tab:red", label="chain:N")
+    for k, r in enumerate(others):
+        marker = markers[k % len(markers)]
+        right.plot([r["dof"]], [r["fd_us"]], marker, color="tab:red", markersize=8,
+                   markerfacecolor="none", label=r["model"])
+        left.plot([], [], marker, color="black", markerfacecolor="none", label=r["model"])
+    left.set_title("Cold build, per stage")
+    left.set_ylabel("seconds")
+    right.set_title("Forward dynamics per call, from Python")
+    right.set_ylabel("µs per call (median)")
+    from matplotlib.ticker import MaxNLocator
+
+    for ax in (left, right):
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.set_yscale("log")
+        ax.set_xlabel("N (degrees of freedom)")
+        ax.grid(which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+PLOTTERS = {"percall": plot_percall, "batched": plot_batched, "simulation": plot_simulation,
+            "scaling": plot_scaling}
+
+
+def write_plots(results: dict, out: Path) -> dict[str, str]:
+    """One PNG per section that has rows; returns {section: file name}."""
+    written = {}
+    for key, plot in PLOTTERS.items():
+        rows = (results.get(key) or {}).get("rows")
+        if rows:
+            plot(rows, out / PLOTS[key])
+            written[key] = PLOTS[key]
+    return written
+
+
+def write_report(results: dict, out) -> Path:
+    """Write report.md and the PNGs into `out`; return the report's path."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    images = write_plots(results, out)
+    path = out / "report.md"
+    path.write_text(markdown(results, images))
+    return path

@@ -1,0 +1,265 @@
+"""`python -m gagen bench`: every benchmark section in one run, then the report.
+
+Sections: per call on rrr (gagen's backends, Pinocchio, PyDy, plain SymPy), batched
+forward dynamics, the paper's 5-s simulation with each integrator, the scaling study
+(cold builds of chains and URDF robots) and, with --full, the Panda against Pinocchio.
+Writes results.json (after every section, so an interrupted run keeps what it measured),
+report.md and the PNG plots into the output folder.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import tempfile
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .common import PANDA, Progress, compiled, find_urdf_dir, machine_info
+
+SECTIONS = ("percall", "batched", "simulation", "scaling", "panda")
+
+
+@dataclass
+class Settings:
+    """Repeats, loop targets and sizes of one mode ("default", "full" or "smoke")."""
+
+    mode: str = "default"
+    target_s: float = 0.05
+    percall_repeats: int = 31
+    batched_repeats: int = 21
+    batched_sizes: tuple[int, ...] = (1, 10, 100, 1000, 10000)
+    simulation_repeats: int = 11
+    scaling_repeats: int = 21
+    panda_repeats: int = 31
+    sections: tuple[str, ...] = ("percall", "batched", "simulation", "scaling")
+    scaling_models: list[str] | None = None  # None: the mode's default list
+    extra: dict = field(default_factory=dict)
+
+    @classmethod
+    def for_mode(cls, mode: str) -> Settings:
+        if mode == "full":
+            return cls(mode="full", sections=SECTIONS)
+        if mode == "smoke":
+            return cls(mode="smoke", target_s=1e-3, percall_repeats=3, batched_repeats=3,
+                       batched_sizes=(1, 10, 100), simulation_repeats=2, scaling_repeats=3,
+                       panda_repeats=3, scaling_models=["chain:2"])
+        return cls()
+
+
+class Bench:
+    """One benchmark run: settings, the shared rrr models, results and progress."""
+
+    def __init__(self, out: Path, settings: Settings, urdf_dir=None, cache_dir=None,
+                 command: str = "python -m gagen bench", progress: Progress | None = None):
+        self.out = Path(out)
+        self.settings = settings
+        self.urdf_dir = urdf_dir
+        self.progress = progress or Progress()
+        self.scratch = Path(tempfile.mkdtemp(prefix="gagen-bench-"))
+        self.cache_dir = Path(cache_dir) if cache_dir else self.scratch / "rrr"
+        self._rrr: dict | None = None
+        self._rrr_error: str | None = None
+        self.loaded: dict = {}  # scaling study's models, by name, for later sections
+        self.results: dict = {
+            "machine": machine_info(),
+            "settings": {"mode": settings.mode, "command": command,
+                         "target_s": settings.target_s,
+                         "sections": list(settings.sections),
+                         "repeats": {"percall": settings.percall_repeats,
+                                     "batched": settings.batched_repeats,
+                                     "simulation": settings.simulation_repeats,
+                                     "scaling": settings.scaling_repeats,
+                                     "panda": settings.panda_repeats}},
+            "notes": [],
+        }
+
+    # -- shared models ---------------------------------------------------------------
+
+    def rrr(self) -> dict:
+        """rrr's compiled (built into the bench's cache) and lambdify dynamics, once."""
+        if self._rrr is None and self._rrr_error:
+            raise RuntimeError(f"rrr could not be built: {self._rrr_error}")
+        if self._rrr is None:
+            from ..gibbs_appell import derive
+            from ..lambdify_backend import LambdifyDynamics
+            from ..loading import resolve_model
+
+            model = resolve_model("rrr")
+            self.progress("setup", f"building rrr into {self.cache_dir}")
+            dyn, report, times = compiled(model, self.cache_dir)
+            self.results["rrr_build"] = {"stages": dict(report.stages), "cached": report.cached,
+                                         "ops_before_cse": report.ops_before_cse,
+                                         "ops_after_cse": report.ops_after_cse, **times}
+            self.progress("setup", f"rrr compiled in {times['build_s']:.1f} s"
+                          + (" (cached)" if report.cached else "") + "; lambdify backend")
+            self._rrr = {"compiled": dyn, "lambdify": LambdifyDynamics(derive(model))}
+        return self._rrr
+
+    # -- sections --------------------------------------------------------------------
+
+    def percall(self) -> dict:
+        from .percall import percall_rows
+
+        s = self.settings
+        dyns = self.rrr()
+        rows = percall_rows(dyns["compiled"], dyns["lambdify"], s.percall_repeats, s.target_s,
+                            notes=self.results["notes"],
+                            progress=lambda text: self.progress("per call", text))
+        return {"rows": rows, "repeats": s.percall_repeats}
+
+    def batched(self) -> dict:
+        from .batched import batched_rows
+
+        s = self.settings
+        rows = batched_rows(self.rrr(), s.batched_sizes, s.batched_repeats, s.target_s,
+                            progress=lambda text: self.progress("batched", text))
+        return {"rows": rows, "repeats": s.batched_repeats}
+
+    def simulation(self) -> dict:
+        from .simulation import GOAL, simulation_rows
+
+        s = self.settings
+        rows = simulation_rows(self.rrr(), s.simulation_repeats, s.target_s,
+                               progress=lambda text: self.progress("simulation", text))
+        c = next(r for r in rows if r["case"] == "c")
+        verdict = "met" if c["speedup"] >= GOAL else "NOT met"
+        self.results["notes"].append(
+            f"Goal: compiled dopri5 at least {GOAL:,.0f}x faster than scipy RK45 on the "
+            f"lambdify backend: {verdict} ({c['speedup']:,.0f}x).")
+        return {"rows": rows, "repeats": s.simulation_repeats}
+
+    def scaling(self) -> dict:
+        from .scaling import scaling_models, scaling_rows
+
+        s = self.settings
+        if s.scaling_models is not None:
+            models = list(s.scaling_models)
+        else:
+            models, notes = scaling_models(s.mode == "full", self.urdf_dir)
+            self.results["notes"].extend(notes)
+            for note in notes:
+                self.progress("scaling", note)
+        cache = self.scratch / "scaling"
+        self.progress("scaling", f"cold builds of {', '.join(_short(m) for m in models)} "
+                      f"into {cache}")
+
+        def built(row):
+            if math.isnan(row["fd_us"]):
+                self.progress("scaling", f"{row['model']:<10} derive {row['derive_s']:6.2f} s  "
+                              f"generate {row['generate_s']:6.2f} s  compile "
+                              f"{row['compile_s']:6.2f} s  ops {row['ops_before_cse']} -> "
+                              f"{row['ops_after_cse']}")
+
+        rows = scaling_rows(models, cache, s.scaling_repeats, s.target_s, progress=built,
+                            loaded=self.loaded)
+        self.progress("scaling", "forward dynamics: " + ", ".join(
+            f"{r['model']} {r['fd_us']:.2f} µs" for r in rows))
+        return {"rows": rows, "repeats": s.scaling_repeats}
+
+    def panda(self) -> dict:
+        from ..loading import resolve_model
+        from .percall import panda_rows
+
+        s = self.settings
+        folder = find_urdf_dir(self.urdf_dir, needed=PANDA)
+        if folder is None:
+            note = f"{PANDA} not found: the Panda per-call section is skipped (--urdf-dir)."
+            self.results["notes"].append(note)
+            self.progress("panda", note)
+            return {"rows": [], "skipped": note}
+        urdf = folder / PANDA
+        dyn = self.loaded.get(str(urdf))  # built by the scaling study if it ran
+        if dyn is None:
+            dyn, _, times = compiled(resolve_model(urdf), self.scratch / "panda")
+            self.progress("panda", f"Panda built in {times['build_s']:.1f} s")
+        self.progress("panda", "timing")
+        rows = panda_rows(dyn, urdf, s.panda_repeats, s.target_s, baseline="gagen")
+        if not any(r["implementation"] == "pinocchio" for r in rows):
+            self.results["notes"].append("Pinocchio is not installed: the Panda section "
+                                         "times gagen only.")
+        return {"rows": rows, "repeats": s.panda_repeats}
+
+    # -- the run ---------------------------------------------------------------------
+
+    def save(self) -> Path:
+        self.out.mkdir(parents=True, exist_ok=True)
+        path = self.out / "results.json"
+        path.write_text(json.dumps(_jsonable(self.results), indent=1) + "\n")
+        return path
+
+    def run(self) -> int:
+        failed = 0
+        titles = {"percall": "per call", "batched": "batched", "simulation": "simulation",
+                  "scaling": "scaling", "panda": "panda"}
+        try:
+            if {"percall", "batched", "simulation"} & set(self.settings.sections):
+                start = time.perf_counter()
+                try:
+                    self.rrr()
+                except Exception as exc:  # noqa: BLE001 - the scaling study may still run
+                    text = self._rrr_error = f"{type(exc).__name__}: {exc}"
+                    self.results["notes"].append(f"Building rrr failed: {text}")
+                    self.progress("setup", f"FAILED: {text}")
+                self.results.setdefault("rrr_build", {})["setup_s"] = time.perf_counter() - start
+            for key in self.settings.sections:
+                self.progress(titles[key], "start")
+                start = time.perf_counter()
+                try:
+                    section = getattr(self, key)()
+                except Exception as exc:  # noqa: BLE001 - keep the other sections' results
+                    failed += 1
+                    text = f"{type(exc).__name__}: {exc}"
+                    section = {"error": text, "traceback": traceback.format_exc()}
+                    self.results["notes"].append(f"Section {key} failed: {text}")
+                    self.progress(titles[key], f"FAILED: {text}")
+                section["elapsed_s"] = time.perf_counter() - start
+                self.results[key] = section
+                self.progress(titles[key], f"done in {section['elapsed_s']:.1f} s")
+                self.save()
+            self.results["elapsed_s"] = self.progress.elapsed
+            self.save()
+            from .report import write_report
+
+            path = write_report(self.results, self.out)
+            self.progress("report", f"wrote {path}, results.json and the plots")
+        finally:
+            shutil.rmtree(self.scratch, ignore_errors=True)
+        return 1 if failed else 0
+
+
+def _short(name: str) -> str:
+    return Path(name).name if name.endswith(".urdf") else name
+
+
+def _jsonable(value):
+    """NaN and inf as null (strict JSON); numpy scalars as Python numbers."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if hasattr(value, "item") and not isinstance(value, (str, bytes)):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def run(out="bench-out", mode: str = "default", urdf_dir=None, cache_dir=None,
+        sections=None, scaling_models=None, command: str | None = None,
+        progress: Progress | None = None) -> int:
+    """Run the benchmarks of a mode and write the report; 0 if every section worked."""
+    settings = Settings.for_mode(mode)
+    if sections:
+        settings.sections = tuple(s for s in SECTIONS if s in sections)
+    if scaling_models:
+        settings.scaling_models = list(scaling_models)
+    bench = Bench(Path(out), settings, urdf_dir, cache_dir,
+                  command or f"python -m gagen bench --out {out}"
+                  + (" --full" if mode == "full" else ""), progress)
+    return bench.run()

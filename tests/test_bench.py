@@ -1,0 +1,232 @@
+"""The benchmark suite: the interleaved runner, the report writer, and `bench --smoke`."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from gagen.bench import timing
+from gagen.bench.common import cpu_model, find_urdf_dir, machine_info
+from gagen.bench.report import markdown, write_report
+from gagen.bench.scaling import scaling_models
+from gagen.bench.timing import Candidate, interleaved, loop_size, order, quartiles
+from gagen.cli import main
+
+
+class FakeClock:
+    """A clock that only moves when a candidate says how long its call took."""
+
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+    def spend(self, durations):
+        it = iter(durations)
+
+        def call():
+            self.now += next(it)
+
+        return call
+
+
+# ---------------------------------------------------------------------------------- timing
+
+
+def test_round_robin_rotates_the_starting_candidate():
+    assert order(3, 4) == [[0, 1, 2], [1, 2, 0], [2, 0, 1], [0, 1, 2]]
+    log = []
+    cands = [Candidate(name, log.append, (name,)) for name in "abc"]
+    interleaved(cands, repeats=3, numbers=[1, 1, 1])
+    assert "".join(log) == "abc" + "bca" + "cab"
+
+
+def test_loop_size_applies_to_every_call_of_a_sample():
+    log = []
+    cands = [Candidate("a", log.append, ("a",)), Candidate("b", log.append, ("b",))]
+    results = interleaved(cands, repeats=2, numbers=[2, 3])
+    assert "".join(log) == "aabbb" + "bbbaa"
+    assert [r.number for r in results] == [2, 3]
+    assert [len(r.samples) for r in results] == [2, 2]
+
+
+def test_median_iqr_and_ratio_on_a_fake_clock():
+    clock = FakeClock()
+    a = Candidate("a", clock.spend([1.0, 5.0, 3.0, 2.0, 4.0]))
+    b = Candidate("b", clock.spend([6.0] * 5))
+    ta, tb = interleaved([a, b], repeats=5, numbers=[1, 1], clock=clock, baseline="a")
+    assert ta.samples == [1.0, 5.0, 3.0, 2.0, 4.0]
+    assert (ta.q1, ta.median, ta.q3, ta.iqr, ta.min) == (2.0, 3.0, 4.0, 2.0, 1.0)
+    assert tb.median == 6.0 and tb.iqr == 0.0
+    assert ta.ratio == 1.0 and tb.ratio == 2.0 and tb.baseline == "a"
+    row = tb.as_dict()
+    assert row["median_s"] == 6.0 and row["repeats"] == 5 and row["ratio"] == 2.0
+
+
+def test_a_sample_is_the_loop_time_over_the_loop_size():
+    clock = FakeClock()
+    (t,) = interleaved([Candidate("a", clock.spend([1.0, 3.0, 2.0, 2.0]))], repeats=2,
+                       numbers=[2], clock=clock)
+    assert t.samples == [2.0, 2.0]
+
+
+def test_ratios_per_group():
+    clock = FakeClock()
+    cands = [Candidate("x1", clock.spend([1.0] * 3), group="x"),
+             Candidate("x2", clock.spend([3.0] * 3), group="x"),
+             Candidate("y1", clock.spend([2.0] * 3), group="y"),
+             Candidate("y2", clock.spend([1.0] * 3), group="y"),
+             Candidate("z", clock.spend([1.0] * 3), group="z")]
+    res = interleaved(cands, repeats=3, numbers=[1] * 5, clock=clock,
+                      baseline={"x": "x1", "y": "y1"})
+    assert [r.ratio for r in res] == [1.0, 3.0, 1.0, 0.5, None]
+    with pytest.raises(KeyError):
+        timing.apply_baseline(res, "nobody")
+
+
+def test_quartiles_match_linear_interpolation():
+    values = [0.3, 0.1, 0.7, 0.2, 0.9, 0.4]
+    expected = np.percentile(values, [25, 50, 75])
+    np.testing.assert_allclose(quartiles(values), expected)
+    assert quartiles([2.5]) == (2.5, 2.5, 2.5)
+    with pytest.raises(ValueError):
+        quartiles([])
+
+
+def test_loop_is_sized_to_the_target():
+    clock = FakeClock()
+    timer = Candidate("a", clock.spend([1e-4] * 10_000)).timer(clock)
+    assert loop_size(timer, target=0.02) == 200
+
+
+def test_candidate_names_must_be_unique():
+    with pytest.raises(ValueError):
+        interleaved([Candidate("a", len, ("x",)), Candidate("a", len, ("y",))], numbers=[1, 1])
+
+
+def test_real_calls_are_timed():
+    (t,) = interleaved([Candidate("sum", sum, ([1.0, 2.0],))], repeats=3, target=1e-3)
+    assert len(t.samples) == 3 and t.number >= 1 and 0 < t.median < 1e-3
+
+
+# ---------------------------------------------------------------------------------- report
+
+
+def synthetic_results() -> dict:
+    machine = machine_info()
+    machine["cpu"] = "Test CPU 9000"
+    percall = [{"quantity": q, "implementation": impl, "call": "f(x)", "median_us": m,
+                "q1_us": 0.9 * m, "q3_us": 1.1 * m, "iqr_us": 0.2 * m, "ratio": r,
+                "baseline": "gagen compiled", "number": 1000, "repeats": 5}
+               for q, impl, m, r in [("forward dynamics", "gagen compiled", 0.2, 1.0),
+                                     ("forward dynamics", "Pinocchio", 1.5, 7.5),
+                                     ("mass matrix", "gagen compiled", 0.3, 1.0)]]
+    batched = [{"backend": b, "N": n, "call": "fd", "median_s": n * k * 1e-9,
+                "q1_s": 0.0, "q3_s": 0.0, "ns_per_state": k, "iqr_ns_per_state": 1.0,
+                "ratio": k / 60.0, "baseline": "compiled", "number": 10, "repeats": 5}
+               for n in (1, 10) for b, k in (("compiled", 60.0), ("lambdify", 6000.0))]
+    simulation = [{"case": c, "label": label, "backend": "x", "method": m, "median_s": s,
+                   "q1_s": 0.9 * s, "q3_s": 1.1 * s, "min_s": s, "repeats": 3, "calls": 1,
+                   "steps": 301, "nfev": 1820, "final_q_deg": [-60.0, -60.0, -30.0],
+                   "max_dev_rad": 1e-15, "speedup": 0.15 / s}
+                  for c, label, m, s in [("a", "scipy RK45, lambdify backend", "RK45", 0.15),
+                                         ("c", "compiled dopri5", "dopri5", 3e-4)]]
+    scaling = [{"model": name, "dof": n, "derive_s": 0.1 * n, "generate_s": 0.1 * n,
+                "compile_s": 5.0, "build_s": 5.5, "ops_before_cse": 100 * n,
+                "ops_after_cse": 80 * n, "cse_ratio": 1.25, "load_s": 0.01,
+                "fd_us": 0.1 * n, "fd_iqr_us": 0.01, "cached": False}
+               for name, n in (("chain:2", 2), ("chain:4", 4), ("ur5", 6))]
+    return {"machine": machine,
+            "settings": {"mode": "default", "command": "python -m gagen bench",
+                         "target_s": 0.02},
+            "elapsed_s": 83.0,
+            "notes": ["PyDy is not installed: its row is skipped."],
+            "percall": {"rows": percall, "repeats": 5},
+            "batched": {"rows": batched, "repeats": 5},
+            "simulation": {"rows": simulation, "repeats": 3},
+            "scaling": {"rows": scaling, "repeats": 5},
+            "panda": {"error": "RuntimeError: no panda"}}
+
+
+def test_report_has_the_tables_the_machine_and_the_plots(tmp_path):
+    path = write_report(synthetic_results(), tmp_path)
+    text = path.read_text()
+    assert "| CPU | Test CPU 9000" in text
+    for header in (("| quantity | implementation | call | median µs | IQR µs (q1–q3) "
+                   "| ratio to gagen compiled |"),
+                   ("| N | compiled ns/state (IQR) | lambdify ns/state (IQR) "
+                   "| lambdify / compiled |"),
+                   "| case | method | median | spread (quartiles) |",
+                   ("| model | dof | derive s | generate s (incl. CSE) | compile s "
+                   "| ops before CSE | ops after CSE |")):
+        assert header in text, header
+    assert "| forward dynamics | Pinocchio | `f(x)` | 1.50 |" in text
+    assert "| 10 | 60.0 (1.0) | 6,000 (1.0) | 100 |" in text
+    assert "**Failed:** `RuntimeError: no panda`" in text
+    assert "- PyDy is not installed" in text
+    assert "1 min 23 s" in text
+    for png in ("percall.png", "batched.png", "simulation.png", "scaling.png"):
+        assert (tmp_path / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert f"]({png})" in text
+
+
+def test_report_leaves_out_sections_that_did_not_run():
+    results = synthetic_results()
+    for key in ("batched", "simulation", "scaling", "panda"):
+        del results[key]
+    text = markdown(results)
+    assert "Per call on rrr" in text and "Scaling" not in text and "Batched" not in text
+
+
+def test_machine_info_names_cpu_and_versions():
+    info = machine_info()
+    assert info["cpu"] == cpu_model() and info["cpu"]
+    assert info["cores"] >= 1
+    for key in ("python", "numpy", "sympy", "cython", "compiler", "gagen", "date"):
+        assert info[key], key
+
+
+# ------------------------------------------------------------------------- URDFs and CLI
+
+
+def test_urdf_dir_is_found_or_skipped_with_a_note(tmp_path):
+    assert find_urdf_dir(tmp_path) is None
+    (tmp_path / "ur5_robot.urdf").write_text("<robot/>")
+    assert find_urdf_dir(tmp_path) == tmp_path
+    models, notes = scaling_models(full=False, urdf_dir=tmp_path)
+    assert models == ["chain:2", "chain:4", "chain:6", str(tmp_path / "ur5_robot.urdf")]
+    assert notes == []
+    models, notes = scaling_models(full=True, urdf_dir=tmp_path)
+    assert models[:11] == [f"chain:{n}" for n in range(2, 13)]
+    assert len(notes) == 1 and "panda.urdf" in notes[0]
+    models, notes = scaling_models(full=False, urdf_dir=tmp_path / "nowhere")
+    assert models == ["chain:2", "chain:4", "chain:6"] and "ur5_robot.urdf" in notes[0]
+
+
+def test_bench_smoke_run_writes_the_report(tmp_path, cache_dir, capsys):
+    out = tmp_path / "bench"
+    assert main(["bench", "--out", str(out), "--smoke", "--cache-dir", str(cache_dir)]) == 0
+    progress = capsys.readouterr().out
+    for section in ("per call", "batched", "simulation", "scaling", "report"):
+        assert f"] {section}:" in progress, section
+    text = (out / "report.md").read_text()
+    assert f"| CPU | {cpu_model()}" in text
+    assert "(smoke mode)" in text and "| chain:2 | 2 |" in text
+    for header in ("## Per call on rrr", "## Batched forward dynamics",
+                   "## The paper's 5-s simulation", "## Scaling"):
+        assert header in text
+    results = json.loads((out / "results.json").read_text(),
+                         parse_constant=lambda c: pytest.fail(f"{c} in results.json"))
+    rows = results["percall"]["rows"]
+    impls = {r["implementation"] for r in rows}
+    assert {"gagen compiled", "gagen lambdify", "SymPy lambdify (naive)"} <= impls
+    assert all(math.isfinite(r["median_us"]) and r["median_us"] > 0 for r in rows)
+    assert {r["N"] for r in results["batched"]["rows"]} == {1, 10, 100}
+    assert [r["case"] for r in results["simulation"]["rows"]] == ["a", "b", "c", "d"]
+    assert [r["model"] for r in results["scaling"]["rows"]] == ["chain:2"]
+    for png in ("percall.png", "batched.png", "simulation.png", "scaling.png"):
+        assert (out / png).exists()
