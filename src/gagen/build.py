@@ -136,10 +136,12 @@ def generate_sources(model: Model, folder: Path, progress: Progress | None = Non
     name = module_name_for(model, key)
     report = report or BuildReport(model.name, name, folder)
     progress = progress or Progress(report, verbose=False)
+    progress.say("deriving the Gibbs-Appell equations...")
     start = time.perf_counter()
     eqs = derive(model)
     progress.stage("derive", time.perf_counter() - start,
                    f"{model.dof} coordinates, {len(eqs.intermediates)} intermediates")
+    progress.say("generating C (one CSE pass over every output)...")
     start = time.perf_counter()
     code = generate(eqs, name, key)
     write_sources(code, folder)
@@ -231,6 +233,8 @@ def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
     tmp = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=final.parent))
     try:
         generate_sources(model, tmp, progress, report)
+        progress.say(f"compiling with {' '.join(flags)} (Cython and the C compiler, "
+                     "usually 5-15 s)...")
         start = time.perf_counter()
         compile_sources(tmp, name, flags, verbose)
         progress.stage("compile", time.perf_counter() - start, " ".join(flags))
