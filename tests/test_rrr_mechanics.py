@@ -5,48 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
-import sympy.physics.mechanics as me
 
 import gagen
+from gagen.bench.peers import kane_rrr
 from gagen.gibbs_appell import derive, joint_torque_forces
-
-
-def kane_rrr():
-    """Kane's equations for DESIGN.md section 1's robot, written from the paper's figure."""
-    q = me.dynamicsymbols("q1:4")
-    u = me.dynamicsymbols("u1:4")
-    g, L1, L2, L3, m1, m2, m3 = sp.symbols("g L1 L2 L3 m1 m2 m3")
-    Ix = sp.symbols("I1x I2x I3x")
-    Iy = sp.symbols("I1y I2y I3y")
-    Iz = sp.symbols("I1z I2z I3z")
-    T = sp.symbols("T01z T12x T23x")
-    N = me.ReferenceFrame("N")
-    F1 = N.orientnew("F1", "Axis", (q[0], N.z))
-    F2 = F1.orientnew("F2", "Axis", (q[1], F1.x))
-    F3 = F2.orientnew("F3", "Axis", (q[2], F2.x))
-    O = me.Point("O")
-    O.set_vel(N, 0)
-    A = O.locatenew("A", L1 * F1.y)
-    B = A.locatenew("B", L2 * F2.y)
-    C1 = O.locatenew("C1", L1 / 2 * F1.y)
-    C2 = A.locatenew("C2", L2 / 2 * F2.y)
-    C3 = B.locatenew("C3", L3 / 2 * F3.y)
-    frames, centres, masses = (F1, F2, F3), (C1, C2, C3), (m1, m2, m3)
-    C1.set_vel(N, C1.pos_from(O).dt(N))
-    C2.set_vel(N, C2.pos_from(O).dt(N))
-    C3.set_vel(N, C3.pos_from(O).dt(N))
-    bodies = [
-        me.RigidBody(f"B{i+1}", centres[i], frames[i], masses[i],
-                     (me.inertia(frames[i], Ix[i], Iy[i], Iz[i]), centres[i]))
-        for i in range(3)
-    ]
-    loads = [(centres[i], -masses[i] * g * N.z) for i in range(3)]
-    loads += [(F1, T[0] * F1.z - T[1] * F2.x), (F2, T[1] * F2.x - T[2] * F3.x), (F3, T[2] * F3.x)]
-    kdes = [q[i].diff() - u[i] for i in range(3)]
-    km = me.KanesMethod(N, q_ind=q, u_ind=u, kd_eqs=kdes)
-    km.kanes_equations(bodies, loads)
-    # KanesMethod uses u_i = q_i', so its u's are our qd
-    return km, q, u, T
 
 
 @pytest.fixture(scope="module")

@@ -18,6 +18,12 @@ def add_model_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", nargs="?", default="rrr", help=MODEL_HELP)
 
 
+def add_cache_dir_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--cache-dir", metavar="DIR",
+                        help="cache of compiled models (default: $GAGEN_CACHE_DIR or "
+                        "~/.cache/gagen)")
+
+
 def _build(args: argparse.Namespace) -> int:
     from .build import build
     from .loading import resolve_model
@@ -68,8 +74,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR",
                    help="write sources and module here (default for rrr: generated/rrr; "
                    "other models: the cache)")
-    p.add_argument("--cache-dir", metavar="DIR",
-                   help="cache folder (default: $GAGEN_CACHE_DIR or ~/.cache/gagen)")
+    add_cache_dir_argument(p)
     p.add_argument("--fast-math", action="store_true",
                    help="compile with -ffast-math (off by default: it may reorder floating point)")
     p.set_defaults(run=_build)

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import add_model_argument
+from .cli import add_cache_dir_argument, add_model_argument
 
 SCIPY_METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 COMPILED_METHODS = ("dopri5", "rk4")
@@ -257,9 +257,7 @@ def _common(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--backend", choices=("compiled", "lambdify"), default="compiled",
                    help="equations of motion as compiled C or through sympy.lambdify "
                    "(default: %(default)s)")
-    p.add_argument("--cache-dir", metavar="DIR",
-                   help="cache of compiled models (default: $GAGEN_CACHE_DIR or "
-                   "~/.cache/gagen)")
+    add_cache_dir_argument(p)
 
 
 def register(subparsers) -> None:
@@ -325,7 +323,5 @@ def register(subparsers) -> None:
     p.add_argument("--out", default="out/rrr", metavar="DIR",
                    help="output folder (default: %(default)s)")
     p.add_argument("--gif", action="store_true", help="also write an animation, arm.gif")
-    p.add_argument("--cache-dir", metavar="DIR",
-                   help="cache of compiled models (default: $GAGEN_CACHE_DIR or "
-                   "~/.cache/gagen)")
+    add_cache_dir_argument(p)
     p.set_defaults(run=_paper)
