@@ -179,7 +179,7 @@ def markdown(results: dict, images: dict | None = None) -> str:
         simulation_table, None, images)
     pa = results.get("panda", {})
     lines += _section(
-        results, "panda", "Per call on the Panda (7 joints, from its URDF)",
+        results, "panda", "Per call on the Panda (9 coordinates: 7 arm joints and 2 fingers, from its URDF)",
         f"gagen compiled against Pinocchio's own URDF parse, {pa.get('repeats', '?')} "
         "interleaved repeats; ratios to gagen compiled.", percall_table, None, images)
     sc = results.get("scaling", {})

@@ -178,7 +178,7 @@ class Bench:
             self.progress("panda", f"Panda built in {times['build_s']:.1f} s")
         self.progress("panda", "timing")
         rows = panda_rows(dyn, urdf, s.panda_repeats, s.target_s, baseline="gagen")
-        if not any(r["implementation"] == "pinocchio" for r in rows):
+        if not any(r["implementation"] == "Pinocchio" for r in rows):
             self.results["notes"].append("Pinocchio is not installed: the Panda section "
                                          "times gagen only.")
         return {"rows": rows, "repeats": s.panda_repeats}
