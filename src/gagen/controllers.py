@@ -101,7 +101,7 @@ class Controller:
 class PD(Controller):
     """Joint-space PD toward a fixed target, optionally with gravity compensation:
 
-        tau = -kp (q - target) - kd qd  [+ g(q)],   g(q) = inverse_dynamics(q, 0, 0)
+        tau = -kp (q - target) - kd qd  [+ g(q)],   g(q) = dyn.gravity(q) = inverse_dynamics(q, 0, 0)
 
     `kp`, `kd` and `target` are scalars or per-joint arrays. g(q) is the torque that holds
     the arm still at q, so with compensation the arm settles exactly at the target.
@@ -137,9 +137,7 @@ class PD(Controller):
             target = self._sized(self.target, n, "target")
         tau = -kp * (q - target) - kd * qd
         if self.gravity_compensation:
-            dyn = self._require_dynamics()
-            zero = np.zeros_like(q)
-            tau += dyn.inverse_dynamics(q, zero, zero, self._p)
+            tau += self._require_dynamics().gravity(q, self._p)
         return tau
 
     def c_spec(self, n: int) -> dict:
