@@ -8,6 +8,7 @@ same model never leave a half-written module that a later `load` would pick up.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import importlib
 import importlib.util
@@ -23,7 +24,7 @@ from importlib import resources
 from pathlib import Path
 
 from . import __version__
-from .codegen import generate, templates_digest, write_sources
+from .codegen import c_identifier, generate, templates_digest, write_sources
 from .dynamics import DynamicsInfo
 from .gibbs_appell import derive
 from .model import Model
@@ -78,8 +79,6 @@ def source_key(model: Model) -> str:
 
 
 def module_name_for(model: Model, key: str) -> str:
-    from .codegen import c_identifier
-
     return f"gagen_{c_identifier(model.name)}_{key[:12]}"
 
 
@@ -295,6 +294,7 @@ def shipped_module(model: Model, fast_math: bool):
         return None
 
 
+@functools.cache
 def dynamics_class(module):
     """The user-facing class: the compiled kernels plus the shared names and parameters."""
     return type("CompiledDynamics", (module.CompiledModel, DynamicsInfo),
