@@ -84,7 +84,7 @@ STANDALONE_MAIN = r"""
 int main(void) {
     const double p[RRR_NP] = {%(params)s};
     const double q[3] = {0.3, -0.7, 1.1}, qd[3] = {0.5, -1.5, 2.0}, tau[3] = {1.0, 20.0, -5.0};
-    double M[9], F[3], qdd[3], back[3], TV[2];
+    double M[9], F[3], qdd[3], back[3], TV[2], G[3], u[3], gqdd[3];
     rrr_mass_matrix(q, p, M);
     rrr_forcing(q, qd, tau, p, F);
     if (rrr_forward_dynamics(q, qd, tau, p, qdd) != 0) return 3;
@@ -94,6 +94,11 @@ int main(void) {
     for (int i = 0; i < 3; ++i) printf("%%.17g\n", qdd[i]);
     for (int i = 0; i < 3; ++i) printf("%%.17g\n", back[i]);
     printf("%%.17g\n%%.17g\n", TV[0], TV[1]);
+    /* forward dynamics with gravity compensation: qdd under tau + gravity(q) */
+    rrr_gravity(q, p, G);
+    for (int i = 0; i < 3; ++i) u[i] = tau[i] - G[i];
+    if (rrr_forward_dynamics_gc(q, qd, u, p, gqdd) != 0) return 4;
+    for (int i = 0; i < 3; ++i) printf("%%.17g\n", gqdd[i]);
     return 0;
 }
 """
@@ -118,7 +123,9 @@ def test_standalone_c_program_computes_the_same_numbers(tmp_path):
     np.testing.assert_allclose(values[:9], dyn.mass_matrix(q).ravel(), rtol=1e-13)
     np.testing.assert_allclose(values[9:12], qdd, rtol=1e-12)
     np.testing.assert_allclose(values[12:15], tau, rtol=1e-11, atol=1e-11)
-    np.testing.assert_allclose(values[15:], dyn.energy(q, qd), rtol=1e-13)
+    np.testing.assert_allclose(values[15:17], dyn.energy(q, qd), rtol=1e-13)
+    # forward_dynamics_gc(u = tau - g) is forward_dynamics(tau)
+    np.testing.assert_allclose(values[17:], qdd, rtol=1e-12)
 
 
 @needs_gcc
@@ -237,5 +244,5 @@ def test_sources_only_generation_writes_every_file(tmp_path):
     report = generate_sources(gagen.resolve_model("rrr"), tmp_path)
     names = {p.name for p in tmp_path.iterdir()}
     assert {"mass_matrix.c", "rhs.c", "inverse_dynamics.c", "rrr.h", "integrator.c",
-            "integrator.h", f"{report.module_name}.pyx"} == names
+            "integrator.h", "gagen_math.h", f"{report.module_name}.pyx"} == names
     assert report.ops_after_cse < report.ops_before_cse

@@ -48,6 +48,8 @@ int failing_rhs(void *ctx, double t, const double *y, double *dydt);
 int pend_fd(const double *q, const double *qd, const double *tau, const double *p, double *qdd);
 int pend_id(const double *q, const double *qd, const double *qdd, const double *p, double *tau);
 int pair_fd(const double *q, const double *qd, const double *tau, const double *p, double *qdd);
+int pend_fd_gc(const double *q, const double *qd, const double *u, const double *p,
+               double *qdd);
 int pair_id(const double *q, const double *qd, const double *qdd, const double *p, double *tau);
 
 size_t test_sizeof_robot_ctx(void) { return sizeof(gagen_robot_ctx); }
@@ -131,6 +133,16 @@ int pend_id(const double *q, const double *qd, const double *qdd, const double *
     return 0;
 }
 
+/* the same pendulum under u + its gravity torque, in one pass */
+int pend_fd_gc(const double *q, const double *qd, const double *u, const double *p,
+               double *qdd)
+{
+    double inertia = p[0] * p[1] * p[1], gravity = p[0] * p[2] * p[1] * sin(q[0]);
+    if (inertia == 0.0) return 3;
+    qdd[0] = (-p[3] * qd[0] - gravity + (u[0] + gravity)) / inertia;
+    return 0;
+}
+
 /* two pendulums coupled by a torsion spring, p = [m1, l1, m2, l2, g, b, k] */
 int pair_fd(const double *q, const double *qd, const double *tau, const double *p, double *qdd)
 {
@@ -190,6 +202,7 @@ class RobotCtx(ctypes.Structure):
         ("fd", ctypes.c_void_p),
         ("id", ctypes.c_void_p),
         ("gravity", ctypes.c_void_p),
+        ("fd_gc", ctypes.c_void_p),
         ("p", c_double_p),
         ("kind", ctypes.c_int),
         ("kp", c_double_p),
@@ -238,6 +251,8 @@ def lib(tmp_path_factory):
         c_double_p, c_double_p, ctypes.c_double, ctypes.c_int, ctypes.c_double,
         c_double_p, c_double_p, c_double_p,
     ]  # fmt: skip
+    L.gagen_robot_rhs.restype = ctypes.c_int
+    L.gagen_robot_rhs.argtypes = [ctypes.c_void_p, ctypes.c_double, c_double_p, c_double_p]
     L.gagen_controller_torque.restype = ctypes.c_int
     L.gagen_controller_torque.argtypes = [
         ctypes.POINTER(RobotCtx), ctypes.c_double, c_double_p, c_double_p, c_double_p,
@@ -617,7 +632,7 @@ class Robot:
     """Keeps every array referenced by a gagen_robot_ctx alive."""
 
     def __init__(self, lib, model: str, n: int, p, kind: int, kp=None, kd=None, target=None,
-                 gravity=False, q0=None, qf=None, Tp=0.0):  # fmt: skip
+                 gravity=False, q0=None, qf=None, Tp=0.0, fused=False):  # fmt: skip
         self.arrays = {}
 
         def arr(name, v):
@@ -633,6 +648,8 @@ class Robot:
             gravity_compensation=int(gravity), traj_q0=arr("q0", q0), traj_qf=arr("qf", qf),
             traj_Tp=Tp, scratch=arr("scratch", np.full(4 * n, np.nan)),
         )  # fmt: skip
+        if fused:
+            self.ctx.fd_gc = fptr(lib, f"{model}_fd_gc")
 
     @property
     def addr(self):
@@ -693,6 +710,33 @@ def test_pd_with_gravity_compensation_reaches_target(lib):
     q_ss = out[-1, 0]
     assert abs(q_ss - target) > 0.1
     assert abs(20.0 * (target - q_ss) - m * g * ell * math.sin(q_ss)) < 1e-6
+
+
+def test_pd_gravity_in_one_pass_matches_the_general_path(lib):
+    """With fd_gc set, PD + gravity compensation takes one model pass per evaluation."""
+    common = {"kp": [20.0], "kd": [5.0], "target": [1.0], "gravity": True}
+    general = Robot(lib, "pend", 1, PEND_P, 1, **common)
+    fused = Robot(lib, "pend", 1, PEND_P, 1, fused=True, **common)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        t, (q, qd) = rng.uniform(0, 5), rng.normal(size=2) * 2
+        y = np.array([q, qd])
+        a, b = np.empty(2), np.empty(2)
+        assert lib.gagen_robot_rhs(general.addr, t, _dp(y), _dp(a)) == 0
+        assert lib.gagen_robot_rhs(fused.addr, t, _dp(y), _dp(b)) == 0
+        np.testing.assert_allclose(b, a, rtol=1e-14, atol=1e-14)
+    t_eval = np.linspace(0.0, 5.0, 11)
+    rc_a, out_a, stats_a = run_dopri5(lib, "gagen_robot_rhs", general.addr, [0.0, 0.0], 0.0,
+                                      5.0, t_eval, rtol=1e-9, atol=1e-12)
+    rc_b, out_b, stats_b = run_dopri5(lib, "gagen_robot_rhs", fused.addr, [0.0, 0.0], 0.0,
+                                      5.0, t_eval, rtol=1e-9, atol=1e-12)
+    assert rc_a == rc_b == 0
+    assert (stats_a.nfev, stats_a.nrejected) == (stats_b.nfev, stats_b.nrejected)
+    np.testing.assert_allclose(out_b, out_a, rtol=1e-12, atol=1e-12)
+    # a model failure is passed through as the integrator's status
+    bad = Robot(lib, "pend", 1, [0.0, 0.8, 9.81, 0.05], 1, fused=True, **common)
+    rc, _, _ = run_dopri5(lib, "gagen_robot_rhs", bad.addr, [0.0, 0.0], 0.0, 1.0, [1.0])
+    assert rc == 3
 
 
 def test_computed_torque_tracks_eq11(lib):

@@ -50,6 +50,11 @@ void rrr_inverse_dynamics(const double *q, const double *qd, const double *qdd,
                                   const double *p, double *tau);
 /* G = the gravity torques, inverse_dynamics(q, 0, 0): what holds the robot still */
 void rrr_gravity(const double *q, const double *p, double *G);
+/* Forward dynamics with gravity compensation: qdd under the torque u + gravity(q), with
+ * gravity(q) from the same pass over the equations as M and F (what a PD law with gravity
+ * compensation needs, at the cost of one forward dynamics). Returns as forward_dynamics. */
+int rrr_forward_dynamics_gc(const double *q, const double *qd, const double *u,
+                                    const double *p, double *qdd);
 /* TV[0] = kinetic energy, TV[1] = potential energy (zero at the world origin) */
 void rrr_energy(const double *q, const double *qd, const double *p, double *TV);
 

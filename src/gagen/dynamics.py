@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from functools import cached_property
 
 import numpy as np
 
@@ -21,7 +22,7 @@ class DynamicsInfo:
 
     @property
     def coordinates(self) -> list[str]:
-        return self.model.coordinates
+        return list(self._coordinates)
 
     @property
     def parameters(self) -> dict[str, float]:
@@ -29,13 +30,24 @@ class DynamicsInfo:
 
     @property
     def n(self) -> int:
-        return self.model.dof
+        return len(self._coordinates)
+
+    @cached_property
+    def _coordinates(self) -> tuple[str, ...]:
+        # the model is fixed once its equations are built; walking its tree on every
+        # call would cost microseconds in the simulation loop
+        return tuple(self.model.coordinates)
 
     def parameter_vector(self, p=None) -> np.ndarray:
         """Full parameter array in `parameters` order from None, a dict of overrides or an array."""
-        defaults = self.model.parameter_vector()
         if p is None:
-            return defaults
+            cached = self.__dict__.get("_default_parameters")
+            if cached is None:
+                # the defaults are fixed when the equations are built (the compiled module
+                # bakes them in), so they are read from the model once
+                cached = self.__dict__["_default_parameters"] = self.model.parameter_vector()
+            return cached.copy()
+        defaults = self.model.parameter_vector()
         if isinstance(p, Mapping):
             names = list(self.model.parameters)
             out = defaults.copy()

@@ -148,7 +148,8 @@ class Model:
         return {name: sp.Symbol(name) for name in self.parameters}
 
     def parameter_vector(self) -> np.ndarray:
-        return np.array([float(v) for v in self.parameters.values()], dtype=float)
+        """The default parameters as a fresh array, in `parameters` order."""
+        return np.fromiter(self.parameters.values(), dtype=float, count=len(self.parameters))
 
     def canonical(self) -> str:
         """A deterministic text of everything that defines the equations (for hashing)."""

@@ -169,6 +169,55 @@ static int gagen_dp_initial_step(gagen_ode_fn f, void *ctx, int n, double t0, co
     return GAGEN_OK;
 }
 
+/* Output after the accepted step from (t, y) to (t_new, y_new), h = t_new - t, as
+ * solve_ivp writes it after each step: the rows of y_out for t_eval in (t, t_new) from
+ * scipy's dense output (RkDenseOutput), then the exact y_new for t_eval == t_new.
+ * Returns the new ie.
+ *
+ * Q = K.T @ P is stored by columns, Q[c*n + i], so that the evaluation loop runs over
+ * contiguous memory, and built in one pass over the elements, each sum in np.dot's
+ * order.  The zero entries of P (row 1, and column 0 below row 0) are skipped: after an
+ * accepted step every K[s][i] is finite (a non-finite one makes the error norm NaN or
+ * inf, which rejects the step), so those terms are exact zeros and leave the sums
+ * unchanged (a sum started at +0.0 never becomes -0.0). */
+static int gagen_dp_dense_output(int n, double *const K[GAGEN_DP_NSTAGES + 1],
+                                 const double *y, const double *y_new, double t, double h,
+                                 double t_new, double direction, const double *t_eval,
+                                 int n_eval, int ie, double *y_out, double *restrict Q)
+{
+    int i, c;
+    if (ie < n_eval && direction * (t_eval[ie] - t_new) < 0) {
+        const double *q0 = Q, *q1 = Q + n, *q2 = Q + 2L * n, *q3 = Q + 3L * n;
+        for (i = 0; i < n; ++i) {
+            double k0 = K[0][i], k2 = K[2][i], k3 = K[3][i], k4 = K[4][i], k5 = K[5][i];
+            double k6 = K[6][i];
+            Q[i] = 0.0 + k0 * gagen_dp_P[0][0];
+            for (c = 1; c < 4; ++c) {
+                double acc = 0.0 + k0 * gagen_dp_P[0][c];
+                acc += k2 * gagen_dp_P[2][c];
+                acc += k3 * gagen_dp_P[3][c];
+                acc += k4 * gagen_dp_P[4][c];
+                acc += k5 * gagen_dp_P[5][c];
+                Q[(long)c * n + i] = acc + k6 * gagen_dp_P[6][c];
+            }
+        }
+        do {
+            double x = (t_eval[ie] - t) / h;
+            double p0 = x, p1 = p0 * x, p2 = p1 * x, p3 = p2 * x;
+            double *yo = y_out + (long)ie * n;
+            for (i = 0; i < n; ++i)
+                yo[i] = y[i] + h * (q0[i] * p0 + q1[i] * p1 + q2[i] * p2 + q3[i] * p3);
+            ++ie;
+        } while (ie < n_eval && direction * (t_eval[ie] - t_new) < 0);
+    }
+    /* Exact step value at the step end (in particular at t1). */
+    while (ie < n_eval && t_eval[ie] == t_new) {
+        gagen_copy(n, y_new, y_out + (long)ie * n);
+        ++ie;
+    }
+    return ie;
+}
+
 int gagen_dopri5(gagen_ode_fn f, void *ctx, int n, double t0, double t1, const double *y0,
                  double rtol, const double *atol, double first_step, double max_step,
                  long max_steps, const double *t_eval, int n_eval, double *y_out,
@@ -177,7 +226,7 @@ int gagen_dopri5(gagen_ode_fn f, void *ctx, int n, double t0, double t1, const d
     gagen_ode_stats st = {0, 0, 0, 0, 0};
     double *K[GAGEN_DP_NSTAGES + 1], *y, *y_new, *ytmp, *Q, *swap;
     double direction = (t1 != t0) ? (t1 > t0 ? 1.0 : -1.0) : 1.0;
-    double t, h_abs;
+    double t, h_abs, root_n = pow((double)n, 0.5);
     int i, j, s, rc, ie = 0;
 
     rc = gagen_check_common(f, n, t0, t1, y0, t_eval, n_eval, y_out, work);
@@ -272,10 +321,15 @@ int gagen_dopri5(gagen_ode_fn f, void *ctx, int n, double t0, double t1, const d
                 r = (acc * h) / scale;
                 ssq += r * r;
             }
-            error_norm = sqrt(ssq) / pow((double)n, 0.5);
+            error_norm = sqrt(ssq) / root_n;
 
             if (error_norm < 1) {
                 double factor;
+                /* Accepted: write this step's output first.  It does not depend on the
+                 * pow() below, so the processor overlaps the two; the next step has to
+                 * wait for pow()'s new step size anyway. */
+                ie = gagen_dp_dense_output(n, K, y, y_new, t, h, t_new, direction, t_eval,
+                                           n_eval, ie, y_out, Q);
                 if (error_norm == 0)
                     factor = GAGEN_DP_MAX_FACTOR;
                 else
@@ -291,32 +345,6 @@ int gagen_dopri5(gagen_ode_fn f, void *ctx, int n, double t0, double t1, const d
             ++st.nrejected;
         }
         ++st.naccepted;
-
-        /* Output for t_eval in (t, t_new], as solve_ivp does after each step. */
-        if (ie < n_eval && direction * (t_eval[ie] - t_new) < 0) {
-            /* Q = K.T @ P, built only for steps that contain output points */
-            for (i = 0; i < n; ++i)
-                for (j = 0; j < 4; ++j) {
-                    double acc = 0.0;
-                    for (s = 0; s <= GAGEN_DP_NSTAGES; ++s) acc += K[s][i] * gagen_dp_P[s][j];
-                    Q[(long)i * 4 + j] = acc;
-                }
-            while (ie < n_eval && direction * (t_eval[ie] - t_new) < 0) {
-                double x = (t_eval[ie] - t) / h;
-                double p0 = x, p1 = p0 * x, p2 = p1 * x, p3 = p2 * x;
-                double *yo = y_out + (long)ie * n;
-                for (i = 0; i < n; ++i) {
-                    const double *q = Q + (long)i * 4;
-                    yo[i] = y[i] + h * (q[0] * p0 + q[1] * p1 + q[2] * p2 + q[3] * p3);
-                }
-                ++ie;
-            }
-        }
-        /* Exact step value at the step end (in particular at t1). */
-        while (ie < n_eval && t_eval[ie] == t_new) {
-            gagen_copy(n, y_new, y_out + (long)ie * n);
-            ++ie;
-        }
 
         /* FSAL: the last stage becomes the first stage of the next step. */
         swap = K[0];
@@ -479,6 +507,17 @@ void gagen_eq11(const double *q0, const double *qf, double Tp, int n, double t, 
     }
 }
 
+long gagen_robot_scratch_size(int n) { return n > 0 ? 4L * n : 0L; }
+
+/* -kp*(q - target) - kd*qd for joint i */
+static double gagen_pd_feedback(const gagen_robot_ctx *c, int i, const double *q,
+                                const double *qd)
+{
+    double kp = c->kp ? c->kp[i] : 0.0, kd = c->kd ? c->kd[i] : 0.0;
+    double target = c->target ? c->target[i] : 0.0;
+    return -kp * (q[i] - target) - kd * qd[i];
+}
+
 int gagen_controller_torque(gagen_robot_ctx *c, double t, const double *q, const double *qd,
                             double *tau)
 {
@@ -512,9 +551,7 @@ int gagen_controller_torque(gagen_robot_ctx *c, double t, const double *q, const
             if (rc != 0) return rc;
         }
         for (i = 0; i < n; ++i) {
-            double kp = c->kp ? c->kp[i] : 0.0, kd = c->kd ? c->kd[i] : 0.0;
-            double target = c->target ? c->target[i] : 0.0;
-            tau[i] = -kp * (q[i] - target) - kd * qd[i];
+            tau[i] = gagen_pd_feedback(c, i, q, qd);
             if (c->gravity_compensation) tau[i] += w2[i];
         }
         return GAGEN_OK;
@@ -534,6 +571,20 @@ int gagen_controller_torque(gagen_robot_ctx *c, double t, const double *q, const
     }
 }
 
+/* PD plus gravity compensation through fd_gc, which adds g(q) from its own pass over the
+ * model: tau = PD + g(q) and F + tau are formed in the same order as on the general path. */
+static int gagen_pd_gravity_rhs(gagen_robot_ctx *c, const double *q, const double *qd,
+                                double *dydt)
+{
+    int i, n = c->n;
+    double *u = c->scratch;
+    for (i = 0; i < n; ++i) {
+        u[i] = gagen_pd_feedback(c, i, q, qd);
+        dydt[i] = qd[i];
+    }
+    return c->fd_gc(q, qd, u, c->p, dydt + n);
+}
+
 int gagen_robot_rhs(void *ctx, double t, const double *y, double *dydt)
 {
     gagen_robot_ctx *c = (gagen_robot_ctx *)ctx;
@@ -544,6 +595,8 @@ int gagen_robot_rhs(void *ctx, double t, const double *y, double *dydt)
     n = c->n;
     q = y;
     qd = y + n;
+    if (c->fd_gc != NULL && c->kind == GAGEN_CTRL_PD && c->gravity_compensation)
+        return gagen_pd_gravity_rhs(c, q, qd, dydt);
     tau = c->scratch;
     rc = gagen_controller_torque(c, t, q, qd, tau);
     if (rc != 0) return rc;

@@ -87,6 +87,9 @@ typedef struct {
     gagen_fd_fn fd;
     gagen_id_fn id;
     gagen_gravity_fn gravity; /* optional: used for gravity compensation when not NULL */
+    /* Optional: qdd under tau + g(q) in one pass (fd with gravity compensation); a PD law
+     * with gravity compensation then costs one model evaluation instead of two. */
+    gagen_fd_fn fd_gc;
     const double *p;
     int kind;                 /* GAGEN_CTRL_* */
     const double *kp, *kd;    /* per-joint gains, length n; NULL means zero */
@@ -95,8 +98,10 @@ typedef struct {
     /* Reference trajectory (paper eq. 11) for computed torque. */
     const double *traj_q0, *traj_qf;
     double traj_Tp;
-    double *scratch; /* caller-provided, at least 4*n doubles */
+    double *scratch; /* caller-provided, gagen_robot_scratch_size(n) doubles */
 } gagen_robot_ctx;
+
+long gagen_robot_scratch_size(int n); /* in doubles: 4n */
 
 /* gagen_ode_fn for y = [q, qd]: tau = controller(t, q, qd), qdd = fd(q, qd, tau). */
 int gagen_robot_rhs(void *ctx, double t, const double *y, double *dydt);

@@ -21,6 +21,8 @@ cdef extern from "rrr.h" nogil:
                                       const double *p, double *tau)
     void rrr_energy(const double *q, const double *qd, const double *p, double *TV)
     void rrr_gravity(const double *q, const double *p, double *G)
+    int rrr_forward_dynamics_gc(const double *q, const double *qd, const double *u,
+                                        const double *p, double *qdd)
 
 cdef extern from "integrator.h" nogil:
     ctypedef int (*gagen_ode_fn)(void *ctx, double t, const double *y, double *dydt)
@@ -37,6 +39,7 @@ cdef extern from "integrator.h" nogil:
         gagen_fd_fn fd
         gagen_id_fn id
         gagen_gravity_fn gravity
+        gagen_fd_fn fd_gc
         const double *p
         int kind
         const double *kp
@@ -56,11 +59,12 @@ cdef extern from "integrator.h" nogil:
                   double h, const double *t_eval, int n_eval, double *y_out, double *work,
                   gagen_ode_stats *stats)
     long gagen_rk4_work_size(int n)
+    long gagen_robot_scratch_size(int n)
     int gagen_robot_rhs(void *ctx, double t, const double *y, double *dydt)
     int gagen_controller_torque(gagen_robot_ctx *c, double t, const double *q, const double *qd,
                                 double *tau)
 
-KEY = "d2af0ba3a4c0b7094aa0080689ea1722980b81f86f4fb2ddc736c2be264ab6a0"
+KEY = "206e25967eacf589dc713a4055bc8b8baf84d1b3c8453635cbcd1449532c8490"
 MODEL_NAME = "rrr"
 COORDINATES = ("q1", "q2", "q3", )
 PARAMETER_NAMES = ("g", "L1", "L2", "L3", "m1", "m2", "m3", "I1x", "I1y", "I1z", "I2x", "I2y", "I2z", "I3x", "I3y", "I3z", )
@@ -69,6 +73,8 @@ PARAMETER_DEFAULTS = (9.81, 0.4, 0.4, 0.4, 60.0, 50.0, 40.0, 0.8, 0.075, 0.8, 0.
 cdef enum:
     NQ = 3
     NP = 16
+    # scratch of the C integrators for 2 NQ states (integrator.h: gagen_dopri5_work_size)
+    DOPRI5_WORK = 14 * 2 * NQ
 
 ctypedef int (*kernel3)(const double *, const double *, const double *, const double *,
                         double *) noexcept nogil
@@ -255,12 +261,23 @@ cdef class CompiledModel:
 def _vector(x, Py_ssize_t size, str name):
     if x is None:
         return np.zeros(size)
+    if type(x) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>x) == cnp.NPY_DOUBLE \
+            and cnp.PyArray_IS_C_CONTIGUOUS(<cnp.ndarray>x) and cnp.PyArray_NDIM(<cnp.ndarray>x) == 1 \
+            and cnp.PyArray_DIM(<cnp.ndarray>x, 0) == size:
+        return x
     arr = np.ascontiguousarray(x, dtype=np.float64).ravel()
     if arr.size == 1 and size > 1:
         arr = np.full(size, arr[0])
     if arr.size != size:
         raise ValueError(f"{name} must have {size} entries, got {arr.size}")
     return arr
+
+
+cdef inline cnp.ndarray _matrix(Py_ssize_t rows, Py_ssize_t cols):
+    cdef cnp.npy_intp dims[2]
+    dims[0] = rows
+    dims[1] = cols
+    return cnp.PyArray_EMPTY(2, dims, cnp.NPY_DOUBLE, 0)
 
 
 cdef class CompiledSimulation:
@@ -273,16 +290,17 @@ cdef class CompiledSimulation:
     def __init__(self, CompiledModel model, p, int kind, kp=None, kd=None, target=None,
                  bint gravity_compensation=False, traj_q0=None, traj_qf=None,
                  double traj_Tp=1.0):
-        params = _converted(model.parameter_vector(p), "p")
+        params = model._parameters(model.parameter_vector(None) if p is None else p)
         arrays = [params] + [_vector(v, NQ, name) for v, name in
                              ((kp, "kp"), (kd, "kd"), (target, "target"),
                               (traj_q0, "trajectory q0"), (traj_qf, "trajectory qf"))]
         self._keep = arrays
-        self._scratch = np.zeros(4 * NQ)
+        self._scratch = np.zeros(gagen_robot_scratch_size(NQ))
         self.ctx.n = NQ
         self.ctx.fd = _forward
         self.ctx.id = _inverse
         self.ctx.gravity = _gravity_only
+        self.ctx.fd_gc = rrr_forward_dynamics_gc
         self.ctx.p = _data(arrays[0])
         self.ctx.kind = kind
         self.ctx.kp = _data(arrays[1])
@@ -294,64 +312,110 @@ cdef class CompiledSimulation:
         self.ctx.traj_Tp = traj_Tp
         self.ctx.scratch = _data(self._scratch)
 
-    def integrate(self, str method, double t0, double t1, y0, t_eval, double rtol=1e-6,
-                  atol=1e-8, double first_step=0.0, double max_step=0.0, long max_steps=0,
-                  double h=1e-3):
-        """Integrate from t0 to t1; return (y at t_eval (m, 2n), status, stats dict)."""
-        cdef cnp.ndarray y = np.ascontiguousarray(y0, dtype=np.float64)
-        cdef cnp.ndarray te = np.ascontiguousarray(t_eval, dtype=np.float64)
-        cdef cnp.ndarray at = _vector(atol, 2 * NQ, "atol")
-        if y.size != 2 * NQ:
-            raise ValueError(f"y0 must have {2 * NQ} entries (q then qd), got {y.size}")
+    cdef tuple _integrate(self, str method, double t0, double t1, cnp.ndarray y0,
+                          cnp.ndarray te, double rtol, atol, double first_step,
+                          double max_step, long max_steps, double h):
+        """Run the C integrator: (y at te (m, 2n), status, stats dict)."""
+        cdef double at[2 * NQ]
+        cdef double work[DOPRI5_WORK]  # the larger of the two
+        cdef Py_ssize_t i
+        cdef bint dopri = method == "dopri5"
+        if not dopri and method != "rk4":
+            raise ValueError(f"unknown compiled method '{method}' (dopri5 or rk4)")
+        if gagen_dopri5_work_size(2 * NQ) > DOPRI5_WORK or gagen_rk4_work_size(2 * NQ) > DOPRI5_WORK:
+            raise RuntimeError("integrator.c needs more scratch memory than the wrapper provides")
+        if isinstance(atol, float):
+            for i in range(2 * NQ):
+                at[i] = atol
+        else:
+            atol = _vector(atol, 2 * NQ, "atol")
+            for i in range(2 * NQ):
+                at[i] = (<double *>cnp.PyArray_DATA(<cnp.ndarray>atol))[i]
         cdef int m = te.size
-        cdef cnp.ndarray out = np.empty((m, 2 * NQ))
+        cdef cnp.ndarray out = _matrix(m, 2 * NQ)
         cdef gagen_ode_stats stats
         cdef int status
-        cdef cnp.ndarray work
-        cdef long size
-        if method == "dopri5":
-            size = gagen_dopri5_work_size(2 * NQ)
-        elif method == "rk4":
-            size = gagen_rk4_work_size(2 * NQ)
-        else:
-            raise ValueError(f"unknown compiled method '{method}' (dopri5 or rk4)")
-        work = np.empty(size)
-        cdef double *py = _data(y)
-        cdef double *pat = _data(at)
+        cdef double *py = _data(y0)
         cdef double *pte = _data(te)
         cdef double *pout = _data(out)
-        cdef double *pwork = _data(work)
-        cdef bint dopri = method == "dopri5"
         with nogil:
             if dopri:
-                status = gagen_dopri5(gagen_robot_rhs, &self.ctx, 2 * NQ, t0, t1, py, rtol, pat,
-                                      first_step, max_step, max_steps, pte, m, pout, pwork,
+                status = gagen_dopri5(gagen_robot_rhs, &self.ctx, 2 * NQ, t0, t1, py, rtol, at,
+                                      first_step, max_step, max_steps, pte, m, pout, work,
                                       &stats)
             else:
                 status = gagen_rk4(gagen_robot_rhs, &self.ctx, 2 * NQ, t0, t1, py, h, pte, m,
-                                   pout, pwork, &stats)
+                                   pout, work, &stats)
         info = {"nfev": stats.nfev, "nsteps": stats.nsteps, "naccepted": stats.naccepted,
                 "nrejected": stats.nrejected}
         return out, status, info
 
+    def integrate(self, str method, double t0, double t1, y0, t_eval, double rtol=1e-6,
+                  atol=1e-8, double first_step=0.0, double max_step=0.0, long max_steps=0,
+                  double h=1e-3):
+        """Integrate from t0 to t1; return (y at t_eval (m, 2n), status, stats dict)."""
+        return self._integrate(method, t0, t1, _vector(y0, 2 * NQ, "y0"),
+                               np.ascontiguousarray(t_eval, dtype=np.float64), rtol, atol,
+                               first_step, max_step, max_steps, h)
+
+    def run(self, str method, double t0, double t1, q0, qd0, t_eval, double rtol=1e-6,
+            atol=1e-8, double first_step=0.0, double max_step=0.0, long max_steps=0,
+            double h=1e-3):
+        """Integrate from (q0, qd0), then split the samples and add the controller's torques.
+
+        Returns (q, qd, tau: fresh (m, n) arrays, status, torque status, stats dict); on a
+        failed integration the rows not reached are NaN and so is tau."""
+        cdef cnp.ndarray q_0 = _vector(q0, NQ, "q0"), qd_0 = _vector(qd0, NQ, "qd0")
+        cdef cnp.ndarray y0 = cnp.PyArray_EMPTY(1, [2 * NQ], cnp.NPY_DOUBLE, 0)
+        cdef Py_ssize_t i, k
+        for i in range(NQ):
+            (<double *>cnp.PyArray_DATA(y0))[i] = (<double *>cnp.PyArray_DATA(q_0))[i]
+            (<double *>cnp.PyArray_DATA(y0))[NQ + i] = (<double *>cnp.PyArray_DATA(qd_0))[i]
+        cdef cnp.ndarray te = np.ascontiguousarray(t_eval, dtype=np.float64)
+        y, status, info = self._integrate(method, t0, t1, y0, te, rtol, atol, first_step,
+                                          max_step, max_steps, h)
+        cdef Py_ssize_t m = cnp.PyArray_DIM(<cnp.ndarray>y, 0)
+        cdef cnp.ndarray q = _matrix(m, NQ), qd = _matrix(m, NQ), tau = _matrix(m, NQ)
+        cdef double *py = _data(<cnp.ndarray>y)
+        cdef double *pq = _data(q)
+        cdef double *pqd = _data(qd)
+        for i in range(m * NQ):
+            k = (i // NQ) * 2 * NQ + i % NQ
+            pq[i] = py[k]
+            pqd[i] = py[k + NQ]
+        cdef int tstatus = 0
+        if status == 0:
+            tstatus = self._torques(_data(te), py, m, _data(tau))
+        else:
+            tau.fill(np.nan)
+        return q, qd, tau, status, tstatus, info
+
+    cdef int _torques(self, const double *t, const double *y, Py_ssize_t m,
+                      double *tau) noexcept nogil:
+        cdef Py_ssize_t i
+        cdef int status
+        for i in range(m):
+            status = gagen_controller_torque(&self.ctx, t[i], y + 2 * NQ * i,
+                                             y + 2 * NQ * i + NQ, tau + NQ * i)
+            if status:
+                return status
+        return 0
+
     def torques(self, t, y):
-        """The controller's torques at times t (m,) and states y (m, 2n)."""
+        """The controller's torques at times t (m,) and states y (m, 2n): (tau, status)."""
         cdef cnp.ndarray tt = np.ascontiguousarray(t, dtype=np.float64)
         cdef cnp.ndarray yy = np.ascontiguousarray(y, dtype=np.float64)
-        cdef Py_ssize_t m = tt.size, i
+        cdef Py_ssize_t m = tt.size
         if yy.ndim != 2 or yy.shape[0] != m or yy.shape[1] != 2 * NQ:
             raise ValueError(f"y must have shape ({m}, {2 * NQ})")
-        cdef cnp.ndarray out = np.empty((m, NQ))
-        cdef double *ty = _data(tt)
+        cdef cnp.ndarray res = _matrix(m, NQ)
+        cdef int status
+        cdef double *pt = _data(tt)
         cdef double *py = _data(yy)
-        cdef double *po = _data(out)
-        cdef int status = 0
-        for i in range(m):
-            status = gagen_controller_torque(&self.ctx, ty[i], py + 2 * NQ * i,
-                                             py + 2 * NQ * i + NQ, po + NQ * i)
-            if status:
-                break
-        return out, status
+        cdef double *pr = _data(res)
+        with nogil:
+            status = self._torques(pt, py, m, pr)
+        return res, status
 
 
 def _raise_not_positive_definite(row):
