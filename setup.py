@@ -16,8 +16,9 @@ def shipped_extensions():
         if len(pyx) != 1:
             continue
         module = pyx[0].stem
-        sources = [pyx[0]] + [folder / f for f in
-                              ("mass_matrix.c", "rhs.c", "inverse_dynamics.c", "integrator.c")]
+        # the model's C files (gagen.codegen.MODEL_C_FILES), not Cython's output
+        sources = [pyx[0]] + sorted(f for f in folder.glob("*.c")
+                                    if not f.name.startswith("gagen_"))
         extensions.append(Extension(
             f"gagen.shipped.{module}",
             [str(s.relative_to(HERE)) for s in sources],

@@ -15,7 +15,7 @@ from conftest import REPO
 
 import gagen
 from gagen.build import build, generate_sources, module_name_for, source_key
-from gagen.codegen import generate
+from gagen.codegen import MODEL_C_FILES, generate
 from gagen.modelfile import parse_model_text
 
 GOLDEN = REPO / "generated" / "rrr"
@@ -73,7 +73,7 @@ def test_every_file_has_the_generated_header():
 
 def test_generated_c_is_standalone_and_has_no_globals():
     code = rrr_code()
-    for name in ("mass_matrix.c", "rhs.c", "inverse_dynamics.c", "rrr.h"):
+    for name in ("mass_matrix.c", "rhs.c", "rhs_gc.c", "inverse_dynamics.c", "rrr.h"):
         assert "Python.h" not in code.files[name]
         assert "static" not in code.files[name]
 
@@ -113,9 +113,9 @@ def test_standalone_c_program_computes_the_same_numbers(tmp_path):
     params = ", ".join(repr(v) for v in dyn.parameters.values())
     (tmp_path / "main.c").write_text(STANDALONE_MAIN % {"params": params})
     exe = tmp_path / "rrr_demo"
+    kernels = [f for f in MODEL_C_FILES if f != "integrator.c"]
     subprocess.run(["gcc", "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic",
-                    "-o", str(exe), "main.c", "mass_matrix.c", "rhs.c", "inverse_dynamics.c",
-                    "-lm"], cwd=tmp_path, check=True)
+                    "-o", str(exe), "main.c", *kernels, "-lm"], cwd=tmp_path, check=True)
     values = np.array(subprocess.run([str(exe)], capture_output=True, text=True,
                                      check=True).stdout.split(), dtype=float)
     q, qd, tau = np.array([0.3, -0.7, 1.1]), np.array([0.5, -1.5, 2.0]), np.array([1.0, 20, -5])
@@ -133,7 +133,7 @@ def test_compiled_objects_define_no_global_data(tmp_path):
     code = rrr_code()
     for name, text in code.files.items():
         (tmp_path / name).write_text(text)
-    for src in ("mass_matrix.c", "rhs.c", "inverse_dynamics.c", "integrator.c"):
+    for src in MODEL_C_FILES:
         obj = tmp_path / (src + ".o")
         subprocess.run(["gcc", "-std=c99", "-O2", "-c", src, "-o", str(obj)], cwd=tmp_path,
                        check=True)
@@ -243,6 +243,6 @@ def test_compiler_errors_are_shown(tmp_path, monkeypatch):
 def test_sources_only_generation_writes_every_file(tmp_path):
     report = generate_sources(gagen.resolve_model("rrr"), tmp_path)
     names = {p.name for p in tmp_path.iterdir()}
-    assert {"mass_matrix.c", "rhs.c", "inverse_dynamics.c", "rrr.h", "integrator.c",
-            "integrator.h", "gagen_math.h", f"{report.module_name}.pyx"} == names
+    assert {*MODEL_C_FILES, "rrr.h", "integrator.h", "gagen_math.h",
+            f"{report.module_name}.pyx"} == names
     assert report.ops_after_cse < report.ops_before_cse

@@ -100,7 +100,6 @@ void rrr_inverse_dynamics(const double *q, const double *qd, const double *qdd,
     tau[2] = t9*t85 + t98 + t68;
 }
 
-GAGEN_KERNEL
 void rrr_energy(const double *q, const double *qd, const double *p, double *TV)
 {
     const double t0 = qd[0]*qd[0];

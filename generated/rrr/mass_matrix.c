@@ -2,7 +2,6 @@
 #include "gagen_math.h"
 #include "rrr.h"
 
-GAGEN_KERNEL
 void rrr_mass_matrix(const double *q, const double *p, double *M)
 {
     const double t5 = (1.0/2.0)*p[3];

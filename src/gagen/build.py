@@ -24,7 +24,7 @@ from importlib import resources
 from pathlib import Path
 
 from . import __version__
-from .codegen import c_identifier, generate, templates_digest, write_sources
+from .codegen import MODEL_C_FILES, c_identifier, generate, templates_digest, write_sources
 from .dynamics import DynamicsInfo
 from .gibbs_appell import derive
 from .model import Model
@@ -159,10 +159,11 @@ def check_compiler() -> None:
             "pure-Python backend: gagen.load(model, backend=\"lambdify\")")
 
 
-# Runs in a subprocess inside the build folder. The model's C files compile in parallel with
-# the Cython wrapper (each is one gcc process), then setuptools links them into one module.
+# Runs in a subprocess inside the build folder. Two workers compile the C files (each one gcc
+# process), the largest first, so that the biggest kernel file and the Cython wrapper
+# overlap; then setuptools links them into one module.
 _BUILD_SCRIPT = """
-import sys, sysconfig, numpy
+import os, sys, sysconfig, numpy
 from concurrent.futures import ThreadPoolExecutor
 from distutils.ccompiler import new_compiler
 from distutils.sysconfig import customize_compiler
@@ -179,10 +180,9 @@ def compile_all(sources):
     return cc.compile(sources, output_dir="_build", include_dirs=includes, macros=macros,
                       extra_postargs=flags)
 
-# the wrapper on one core, the model's C files on the other
+sources = sorted([name + ".c"] + sys.argv[3].split(), key=lambda s: -os.path.getsize(s))
 with ThreadPoolExecutor(max_workers=2) as pool:
-    parts = list(pool.map(compile_all, [[name + ".c"], ["rhs.c", "mass_matrix.c",
-                                          "inverse_dynamics.c", "integrator.c"]]))
+    parts = list(pool.map(compile_all, [[s] for s in sources]))
 cc.link_shared_object([o for part in parts for o in part],
                       name + sysconfig.get_config_var("EXT_SUFFIX"), libraries=["m"])
 """
@@ -191,7 +191,8 @@ cc.link_shared_object([o for part in parts for o in part],
 def compile_sources(folder: Path, module_name: str, flags: list[str], verbose: bool) -> Path:
     """Cythonize and compile the sources in `folder` in a subprocess; return the module path."""
     check_compiler()
-    proc = subprocess.run([sys.executable, "-c", _BUILD_SCRIPT, module_name, " ".join(flags)],
+    proc = subprocess.run([sys.executable, "-c", _BUILD_SCRIPT, module_name, " ".join(flags),
+                           " ".join(MODEL_C_FILES)],
                           cwd=folder, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
         raise BuildError(f"compiling {module_name} in {folder} failed:\n{proc.stdout}\n{proc.stderr}")

@@ -24,11 +24,13 @@ from sympy.printing.precedence import PRECEDENCE, precedence
 from . import __version__
 from .gibbs_appell import Equations
 
-TEMPLATE_FILES = ("macros.j2", "header.h.j2", "mass_matrix.c.j2", "rhs.c.j2",
+TEMPLATE_FILES = ("macros.j2", "header.h.j2", "mass_matrix.c.j2", "rhs.c.j2", "rhs_gc.c.j2",
                   "inverse_dynamics.c.j2", "wrapper.pyx.j2", "integrator.c", "integrator.h",
                   "gagen_math.h")
 # copied verbatim next to the generated sources
 COPIED_FILES = ("integrator.c", "integrator.h", "gagen_math.h")
+# the C files of a model, all compiled into its module
+MODEL_C_FILES = ("mass_matrix.c", "rhs.c", "rhs_gc.c", "inverse_dynamics.c", "integrator.c")
 _C_KEYWORDS = frozenset({
     "auto", "break", "case", "char", "const", "continue", "default", "do", "double", "else",
     "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register",
@@ -309,6 +311,7 @@ def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
         f"{ident}.h": env.get_template("header.h.j2").render(context),
         "mass_matrix.c": env.get_template("mass_matrix.c.j2").render(context),
         "rhs.c": env.get_template("rhs.c.j2").render(context),
+        "rhs_gc.c": env.get_template("rhs_gc.c.j2").render(context),
         "inverse_dynamics.c": env.get_template("inverse_dynamics.c.j2").render(context),
         f"{module_name}.pyx": env.get_template("wrapper.pyx.j2").render(context),
     }

@@ -269,9 +269,10 @@ GAGEN_TRIG_INLINE double gagen_cos(double x)
 }
 
 /*
- * GAGEN_KERNEL marks the generated kernels.  Where GCC can pick a function's version when
- * the library loads (x86-64 Linux with glibc's ifunc), each kernel is built twice: for
- * any x86-64 and for CPUs with fused multiply-add, about 10 % faster.  Define
+ * GAGEN_KERNEL marks the kernels that run in loops (forward and inverse dynamics,
+ * gravity).  Where GCC can pick a function's version when the library loads (x86-64
+ * Linux with glibc's ifunc), each is built twice: for any x86-64 and for CPUs with fused
+ * multiply-add, about 10 % faster; the price is their compile time, doubled.  Define
  * GAGEN_KERNEL as empty to build one portable version only.
  */
 #ifndef GAGEN_KERNEL

@@ -64,7 +64,7 @@ cdef extern from "integrator.h" nogil:
     int gagen_controller_torque(gagen_robot_ctx *c, double t, const double *q, const double *qd,
                                 double *tau)
 
-KEY = "206e25967eacf589dc713a4055bc8b8baf84d1b3c8453635cbcd1449532c8490"
+KEY = "eb89b7cadf78ce0c5e55c6fca16f52376740460f1f563b50249151af2a18fd3f"
 MODEL_NAME = "rrr"
 COORDINATES = ("q1", "q2", "q3", )
 PARAMETER_NAMES = ("g", "L1", "L2", "L3", "m1", "m2", "m3", "I1x", "I1y", "I1z", "I2x", "I2y", "I2z", "I3x", "I3y", "I3z", )
