@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -15,8 +16,10 @@ from conftest import REPO
 
 import gagen
 from gagen.build import build, generate_sources, module_name_for, source_key
-from gagen.codegen import MODEL_C_FILES, generate
+from gagen.codegen import COPIED_FILES, MODEL_C_FILES, generate
+from gagen.controllers import paper_controller
 from gagen.modelfile import parse_model_text
+from gagen.simulate import simulate
 
 GOLDEN = REPO / "generated" / "rrr"
 UPDATE_HINT = ("the generated C of 'rrr' changed; if that is intended, update the golden files "
@@ -73,9 +76,14 @@ def test_every_file_has_the_generated_header():
 
 def test_generated_c_is_standalone_and_has_no_globals():
     code = rrr_code()
-    for name in ("mass_matrix.c", "rhs.c", "rhs_gc.c", "inverse_dynamics.c", "rrr.h"):
-        assert "Python.h" not in code.files[name]
-        assert "static" not in code.files[name]
+    for name in (*MODEL_C_FILES, "rrr.h", *COPIED_FILES):
+        assert "Python.h" not in code.files[name], name
+    for name in ("mass_matrix.c", "rhs.c", "inverse_dynamics.c", "rrr.h"):
+        assert "static" not in code.files[name], name
+    # simulation.c's own functions are static; its only data are gagen_ode.h's constant
+    # tableaus (test_compiled_objects_define_no_global_data checks the object file)
+    assert re.search(r"static\s+(?!int|void|inline|const double gagen_dp_)", code.files[
+        "simulation.c"] + code.files["gagen_second_order.h"]) is None
 
 
 STANDALONE_MAIN = r"""
@@ -99,6 +107,17 @@ int main(void) {
     for (int i = 0; i < 3; ++i) u[i] = tau[i] - G[i];
     if (rrr_forward_dynamics_gc(q, qd, u, p, gqdd) != 0) return 4;
     for (int i = 0; i < 3; ++i) printf("%%.17g\n", gqdd[i]);
+    /* the paper's direct dynamics, 1 s under its PD law with gravity compensation */
+    const double kp[3] = {500, 300, 200}, kd[3] = {300, 150, 100};
+    const double target[3] = {-1.0471975511965976, -1.0471975511965976, -0.5235987755982988};
+    const gagen_control law = {GAGEN_CTRL_PD, kp, kd, target, 1, NULL, NULL, 0.0};
+    const double y0[6] = {0}, atol[6] = {1e-8, 1e-8, 1e-8, 1e-8, 1e-8, 1e-8}, t_end = 1.0;
+    double y[6];
+    gagen_ode_stats stats;
+    if (rrr_simulate(GAGEN_METHOD_DOPRI5, &law, p, 0.0, 1.0, y0, 1e-6, atol, 0.0, 0.0, 0, 0.0,
+                     &t_end, 1, y, &stats) != 0) return 5;
+    for (int i = 0; i < 6; ++i) printf("%%.17g\n", y[i]);
+    printf("%%ld\n", stats.nfev);
     return 0;
 }
 """
@@ -125,7 +144,13 @@ def test_standalone_c_program_computes_the_same_numbers(tmp_path):
     np.testing.assert_allclose(values[12:15], tau, rtol=1e-11, atol=1e-11)
     np.testing.assert_allclose(values[15:17], dyn.energy(q, qd), rtol=1e-13)
     # forward_dynamics_gc(u = tau - g) is forward_dynamics(tau)
-    np.testing.assert_allclose(values[17:], qdd, rtol=1e-12)
+    np.testing.assert_allclose(values[17:20], qdd, rtol=1e-12)
+    # rrr_simulate is gagen.simulate's compiled dopri5
+    compiled = gagen.load("rrr")
+    res = simulate(compiled, (0.0, 1.0), np.zeros(3), None, paper_controller(),
+                   method="dopri5", t_eval=[1.0])
+    np.testing.assert_allclose(values[20:26], np.hstack([res.q[0], res.qd[0]]), rtol=1e-10)
+    assert values[26] == res.stats["nfev"]
 
 
 @needs_gcc
@@ -243,6 +268,5 @@ def test_compiler_errors_are_shown(tmp_path, monkeypatch):
 def test_sources_only_generation_writes_every_file(tmp_path):
     report = generate_sources(gagen.resolve_model("rrr"), tmp_path)
     names = {p.name for p in tmp_path.iterdir()}
-    assert {*MODEL_C_FILES, "rrr.h", "integrator.h", "gagen_math.h",
-            f"{report.module_name}.pyx"} == names
+    assert {*MODEL_C_FILES, *COPIED_FILES, "rrr.h", f"{report.module_name}.pyx"} == names
     assert report.ops_after_cse < report.ops_before_cse

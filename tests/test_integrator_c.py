@@ -1,7 +1,9 @@
-"""Tests of the standalone C99 integrators and controllers in templates/integrator.c.
+"""Tests of the standalone C99 integrators in templates/integrator.c (and gagen_ode.h).
 
 The C file is compiled with gcc together with a small C file of test right-hand sides
-and fake robot models into a shared library, which is driven through ctypes.
+into a shared library, which is driven through ctypes. (The model-specialised
+second-order integrators of gagen_second_order.h are tested through the compiled models,
+in test_simulation_c.py.)
 gagen_dopri5 is a transcription of scipy's RK45, so besides the values, the step
 sequence itself (nfev, accepted and rejected steps) must be identical to scipy's.
 """
@@ -37,7 +39,6 @@ TEST_MODELS_C = r"""
 #include <stddef.h>
 #include "integrator.h"
 
-size_t test_sizeof_robot_ctx(void);
 size_t test_sizeof_stats(void);
 int osc_rhs(void *ctx, double t, const double *y, double *dydt);
 int vdp_rhs(void *ctx, double t, const double *y, double *dydt);
@@ -45,14 +46,7 @@ int kepler_rhs(void *ctx, double t, const double *y, double *dydt);
 int forced_rhs(void *ctx, double t, const double *y, double *dydt);
 int blowup_rhs(void *ctx, double t, const double *y, double *dydt);
 int failing_rhs(void *ctx, double t, const double *y, double *dydt);
-int pend_fd(const double *q, const double *qd, const double *tau, const double *p, double *qdd);
-int pend_id(const double *q, const double *qd, const double *qdd, const double *p, double *tau);
-int pair_fd(const double *q, const double *qd, const double *tau, const double *p, double *qdd);
-int pend_fd_gc(const double *q, const double *qd, const double *u, const double *p,
-               double *qdd);
-int pair_id(const double *q, const double *qd, const double *qdd, const double *p, double *tau);
 
-size_t test_sizeof_robot_ctx(void) { return sizeof(gagen_robot_ctx); }
 size_t test_sizeof_stats(void) { return sizeof(gagen_ode_stats); }
 
 /* damped oscillator, p = [omega, zeta] */
@@ -116,51 +110,6 @@ int failing_rhs(void *ctx, double t, const double *y, double *dydt)
     dydt[0] = -y[0];
     return 0;
 }
-
-/* 1-DOF pendulum, q from the hanging position, p = [m, l, g, b]:
- * m l^2 qdd + b qd + m g l sin q = tau */
-int pend_fd(const double *q, const double *qd, const double *tau, const double *p, double *qdd)
-{
-    double inertia = p[0] * p[1] * p[1];
-    if (inertia == 0.0) return 3;
-    qdd[0] = (tau[0] - p[3] * qd[0] - p[0] * p[2] * p[1] * sin(q[0])) / inertia;
-    return 0;
-}
-
-int pend_id(const double *q, const double *qd, const double *qdd, const double *p, double *tau)
-{
-    tau[0] = p[0] * p[1] * p[1] * qdd[0] + p[3] * qd[0] + p[0] * p[2] * p[1] * sin(q[0]);
-    return 0;
-}
-
-/* the same pendulum under u + its gravity torque, in one pass */
-int pend_fd_gc(const double *q, const double *qd, const double *u, const double *p,
-               double *qdd)
-{
-    double inertia = p[0] * p[1] * p[1], gravity = p[0] * p[2] * p[1] * sin(q[0]);
-    if (inertia == 0.0) return 3;
-    qdd[0] = (-p[3] * qd[0] - gravity + (u[0] + gravity)) / inertia;
-    return 0;
-}
-
-/* two pendulums coupled by a torsion spring, p = [m1, l1, m2, l2, g, b, k] */
-int pair_fd(const double *q, const double *qd, const double *tau, const double *p, double *qdd)
-{
-    double spring = p[6] * (q[0] - q[1]);
-    qdd[0] = (tau[0] - p[5] * qd[0] - p[0] * p[4] * p[1] * sin(q[0]) - spring)
-             / (p[0] * p[1] * p[1]);
-    qdd[1] = (tau[1] - p[5] * qd[1] - p[2] * p[4] * p[3] * sin(q[1]) + spring)
-             / (p[2] * p[3] * p[3]);
-    return 0;
-}
-
-int pair_id(const double *q, const double *qd, const double *qdd, const double *p, double *tau)
-{
-    double spring = p[6] * (q[0] - q[1]);
-    tau[0] = p[0] * p[1] * p[1] * qdd[0] + p[5] * qd[0] + p[0] * p[4] * p[1] * sin(q[0]) + spring;
-    tau[1] = p[2] * p[3] * p[3] * qdd[1] + p[5] * qd[1] + p[2] * p[4] * p[3] * sin(q[1]) - spring;
-    return 0;
-}
 """
 
 # numpy twins of the C right-hand sides, for scipy
@@ -196,26 +145,6 @@ class FailCtx(ctypes.Structure):
     _fields_ = [("calls", ctypes.c_long), ("fail_at", ctypes.c_long), ("code", ctypes.c_int)]
 
 
-class RobotCtx(ctypes.Structure):
-    _fields_ = [
-        ("n", ctypes.c_int),
-        ("fd", ctypes.c_void_p),
-        ("id", ctypes.c_void_p),
-        ("gravity", ctypes.c_void_p),
-        ("fd_gc", ctypes.c_void_p),
-        ("p", c_double_p),
-        ("kind", ctypes.c_int),
-        ("kp", c_double_p),
-        ("kd", c_double_p),
-        ("target", c_double_p),
-        ("gravity_compensation", ctypes.c_int),
-        ("traj_q0", c_double_p),
-        ("traj_qf", c_double_p),
-        ("traj_Tp", ctypes.c_double),
-        ("scratch", c_double_p),
-    ]
-
-
 def _dp(a: np.ndarray):
     return a.ctypes.data_as(c_double_p)
 
@@ -246,18 +175,6 @@ def lib(tmp_path_factory):
     for name in ("gagen_dopri5_work_size", "gagen_rk4_work_size"):
         getattr(L, name).restype = ctypes.c_long
         getattr(L, name).argtypes = [ctypes.c_int]
-    L.gagen_eq11.restype = None
-    L.gagen_eq11.argtypes = [
-        c_double_p, c_double_p, ctypes.c_double, ctypes.c_int, ctypes.c_double,
-        c_double_p, c_double_p, c_double_p,
-    ]  # fmt: skip
-    L.gagen_robot_rhs.restype = ctypes.c_int
-    L.gagen_robot_rhs.argtypes = [ctypes.c_void_p, ctypes.c_double, c_double_p, c_double_p]
-    L.gagen_controller_torque.restype = ctypes.c_int
-    L.gagen_controller_torque.argtypes = [
-        ctypes.POINTER(RobotCtx), ctypes.c_double, c_double_p, c_double_p, c_double_p,
-    ]  # fmt: skip
-    L.test_sizeof_robot_ctx.restype = ctypes.c_size_t
     L.test_sizeof_stats.restype = ctypes.c_size_t
     return L
 
@@ -567,7 +484,6 @@ def test_rk4_last_step_lands_on_t1_and_hermite_is_consistent(lib):
 
 
 def test_ctypes_struct_layouts_match_c(lib):
-    assert lib.test_sizeof_robot_ctx() == ctypes.sizeof(RobotCtx)
     assert lib.test_sizeof_stats() == ctypes.sizeof(Stats)
 
 
@@ -588,207 +504,3 @@ def test_integrator_is_strict_c99_without_mutable_globals(tmp_path):
     types = [ln.split()[-2] for ln in syms.splitlines() if len(ln.split()) >= 2]
     writable = [t for t in types if t in "BbDdCGgSs"]
     assert not writable, f"writable data (not reentrant): {writable}"
-
-
-# ---- controllers ------------------------------------------------------------
-
-
-def eq11_numpy(q0, qf, Tp, t):
-    q0, qf = np.asarray(q0, float), np.asarray(qf, float)
-    if t < 0:
-        return q0, np.zeros_like(q0), np.zeros_like(q0)
-    if t > Tp:
-        return qf, np.zeros_like(q0), np.zeros_like(q0)
-    w = 2 * np.pi / Tp
-    d = (qf - q0) / Tp
-    q = q0 + d * (t - Tp / (2 * np.pi) * np.sin(w * t))
-    return q, d * (1 - np.cos(w * t)), d * w * np.sin(w * t)
-
-
-def test_eq11_against_numpy(lib):
-    q0 = np.array([0.1, -0.5, 2.0])
-    qf = np.array([1.0, 0.5, -1.0])
-    Tp = 2.5
-    q, qd, qdd = (np.empty(3) for _ in range(3))
-    for t in [-1.0, 0.0, 0.3, 1.25, 2.0, 2.5, 2.6, 10.0]:
-        lib.gagen_eq11(_dp(q0), _dp(qf), Tp, 3, t, _dp(q), _dp(qd), _dp(qdd))
-        rq, rqd, rqdd = eq11_numpy(q0, qf, Tp, t)
-        np.testing.assert_allclose(q, rq, rtol=1e-14, atol=1e-14)
-        np.testing.assert_allclose(qd, rqd, rtol=1e-14, atol=1e-14)
-        np.testing.assert_allclose(qdd, rqdd, rtol=1e-14, atol=1e-13)
-    # boundary behaviour: starts and ends at rest, derivative consistent with finite differences
-    lib.gagen_eq11(_dp(q0), _dp(qf), Tp, 3, Tp, _dp(q), _dp(qd), _dp(qdd))
-    np.testing.assert_allclose(q, qf, atol=1e-14)
-    np.testing.assert_allclose(qd, 0.0, atol=1e-14)
-    qa, qb = np.empty(3), np.empty(3)
-    eps = 1e-6
-    lib.gagen_eq11(_dp(q0), _dp(qf), Tp, 3, 0.7 - eps, _dp(qa), None, None)  # NULL qd/qdd allowed
-    lib.gagen_eq11(_dp(q0), _dp(qf), Tp, 3, 0.7 + eps, _dp(qb), None, None)
-    lib.gagen_eq11(_dp(q0), _dp(qf), Tp, 3, 0.7, _dp(q), _dp(qd), _dp(qdd))
-    np.testing.assert_allclose((qb - qa) / (2 * eps), qd, rtol=1e-7)
-
-
-class Robot:
-    """Keeps every array referenced by a gagen_robot_ctx alive."""
-
-    def __init__(self, lib, model: str, n: int, p, kind: int, kp=None, kd=None, target=None,
-                 gravity=False, q0=None, qf=None, Tp=0.0, fused=False):  # fmt: skip
-        self.arrays = {}
-
-        def arr(name, v):
-            if v is None:
-                return None
-            a = np.ascontiguousarray(v, dtype=float)
-            self.arrays[name] = a
-            return _dp(a)
-
-        self.ctx = RobotCtx(
-            n=n, fd=fptr(lib, f"{model}_fd"), id=fptr(lib, f"{model}_id"), p=arr("p", p), kind=kind,
-            kp=arr("kp", kp), kd=arr("kd", kd), target=arr("target", target),
-            gravity_compensation=int(gravity), traj_q0=arr("q0", q0), traj_qf=arr("qf", qf),
-            traj_Tp=Tp, scratch=arr("scratch", np.full(4 * n, np.nan)),
-        )  # fmt: skip
-        if fused:
-            self.ctx.fd_gc = fptr(lib, f"{model}_fd_gc")
-
-    @property
-    def addr(self):
-        return ctypes.addressof(self.ctx)
-
-
-PEND_P = [1.5, 0.8, 9.81, 0.05]  # m, l, g, b
-
-
-def test_controller_torque_formulas(lib):
-    kp, kd, target = [30.0], [4.0], [1.0]
-    q, qd = np.array([0.4]), np.array([-0.7])
-    tau = np.empty(1)
-    m, ell, g, b = PEND_P
-
-    r = Robot(lib, "pend", 1, PEND_P, 1, kp, kd, target, gravity=False)
-    assert lib.gagen_controller_torque(ctypes.byref(r.ctx), 0.0, _dp(q), _dp(qd), _dp(tau)) == 0
-    np.testing.assert_allclose(tau, -30.0 * (0.4 - 1.0) - 4.0 * -0.7, rtol=1e-15)
-
-    r = Robot(lib, "pend", 1, PEND_P, 1, kp, kd, target, gravity=True)
-    assert lib.gagen_controller_torque(ctypes.byref(r.ctx), 0.0, _dp(q), _dp(qd), _dp(tau)) == 0
-    expected = -30.0 * (0.4 - 1.0) - 4.0 * -0.7 + m * g * ell * math.sin(0.4)
-    np.testing.assert_allclose(tau, expected, rtol=1e-14)
-
-    r = Robot(lib, "pend", 1, PEND_P, 0)
-    assert lib.gagen_controller_torque(ctypes.byref(r.ctx), 0.0, _dp(q), _dp(qd), _dp(tau)) == 0
-    assert tau[0] == 0.0
-
-    q0, qf, Tp, t = [0.0], [1.2], 2.0, 0.6
-    r = Robot(lib, "pend", 1, PEND_P, 2, kp, kd, q0=q0, qf=qf, Tp=Tp)
-    assert lib.gagen_controller_torque(ctypes.byref(r.ctx), t, _dp(q), _dp(qd), _dp(tau)) == 0
-    qr, qdr, qddr = eq11_numpy(q0, qf, Tp, t)
-    a = qddr + 4.0 * (qdr - qd) + 30.0 * (qr - q)
-    np.testing.assert_allclose(tau, m * ell**2 * a + b * qd + m * g * ell * np.sin(q), rtol=1e-13)
-
-    r = Robot(lib, "pend", 1, PEND_P, 99)
-    rc = lib.gagen_controller_torque(ctypes.byref(r.ctx), 0.0, _dp(q), _dp(qd), _dp(tau))
-    assert rc == GAGEN_ERR_BAD_ARG
-
-
-def test_pd_with_gravity_compensation_reaches_target(lib):
-    target = 1.0
-    r = Robot(lib, "pend", 1, PEND_P, 1, kp=[20.0], kd=[5.0], target=[target], gravity=True)
-    t_eval = np.array([0.0, 1.0, 5.0, 20.0])
-    rc, out, _ = run_dopri5(
-        lib, "gagen_robot_rhs", r.addr, [0.0, 0.0], 0.0, 20.0, t_eval, rtol=1e-9, atol=1e-12
-    )
-    assert rc == 0
-    assert abs(out[-1, 0] - target) < 1e-6 and abs(out[-1, 1]) < 1e-6
-
-    # without compensation the PD settles where kp*(target - q) balances gravity
-    r = Robot(lib, "pend", 1, PEND_P, 1, kp=[20.0], kd=[5.0], target=[target], gravity=False)
-    rc, out, _ = run_dopri5(
-        lib, "gagen_robot_rhs", r.addr, [0.0, 0.0], 0.0, 40.0, [40.0], rtol=1e-9, atol=1e-12
-    )
-    assert rc == 0
-    m, ell, g, _ = PEND_P
-    q_ss = out[-1, 0]
-    assert abs(q_ss - target) > 0.1
-    assert abs(20.0 * (target - q_ss) - m * g * ell * math.sin(q_ss)) < 1e-6
-
-
-def test_pd_gravity_in_one_pass_matches_the_general_path(lib):
-    """With fd_gc set, PD + gravity compensation takes one model pass per evaluation."""
-    common = {"kp": [20.0], "kd": [5.0], "target": [1.0], "gravity": True}
-    general = Robot(lib, "pend", 1, PEND_P, 1, **common)
-    fused = Robot(lib, "pend", 1, PEND_P, 1, fused=True, **common)
-    rng = np.random.default_rng(3)
-    for _ in range(20):
-        t, (q, qd) = rng.uniform(0, 5), rng.normal(size=2) * 2
-        y = np.array([q, qd])
-        a, b = np.empty(2), np.empty(2)
-        assert lib.gagen_robot_rhs(general.addr, t, _dp(y), _dp(a)) == 0
-        assert lib.gagen_robot_rhs(fused.addr, t, _dp(y), _dp(b)) == 0
-        np.testing.assert_allclose(b, a, rtol=1e-14, atol=1e-14)
-    t_eval = np.linspace(0.0, 5.0, 11)
-    rc_a, out_a, stats_a = run_dopri5(lib, "gagen_robot_rhs", general.addr, [0.0, 0.0], 0.0,
-                                      5.0, t_eval, rtol=1e-9, atol=1e-12)
-    rc_b, out_b, stats_b = run_dopri5(lib, "gagen_robot_rhs", fused.addr, [0.0, 0.0], 0.0,
-                                      5.0, t_eval, rtol=1e-9, atol=1e-12)
-    assert rc_a == rc_b == 0
-    assert (stats_a.nfev, stats_a.nrejected) == (stats_b.nfev, stats_b.nrejected)
-    np.testing.assert_allclose(out_b, out_a, rtol=1e-12, atol=1e-12)
-    # a model failure is passed through as the integrator's status
-    bad = Robot(lib, "pend", 1, [0.0, 0.8, 9.81, 0.05], 1, fused=True, **common)
-    rc, _, _ = run_dopri5(lib, "gagen_robot_rhs", bad.addr, [0.0, 0.0], 0.0, 1.0, [1.0])
-    assert rc == 3
-
-
-def test_computed_torque_tracks_eq11(lib):
-    q0, qf, Tp = [0.2], [1.4], 2.0
-    r = Robot(lib, "pend", 1, PEND_P, 2, kp=[100.0], kd=[20.0], q0=q0, qf=qf, Tp=Tp)
-    t_eval = np.linspace(0.0, 3.0, 31)
-    rc, out, _ = run_dopri5(
-        lib, "gagen_robot_rhs", r.addr, [0.2, 0.0], 0.0, 3.0, t_eval, rtol=1e-10, atol=1e-12
-    )
-    assert rc == 0
-    ref = np.array([np.concatenate(eq11_numpy(q0, qf, Tp, t)[:2]) for t in t_eval])
-    np.testing.assert_allclose(out, ref, atol=1e-7)
-
-    # a tracking error at t=0 decays with the chosen error dynamics e'' + kd e' + kp e = 0
-    rc, out, _ = run_dopri5(
-        lib, "gagen_robot_rhs", r.addr, [0.0, 0.0], 0.0, 3.0, [3.0], rtol=1e-10, atol=1e-12
-    )
-    assert rc == 0 and abs(out[-1, 0] - qf[0]) < 1e-6
-
-
-def test_robot_rhs_two_dof_matches_scipy(lib):
-    p = [1.0, 0.7, 2.0, 0.5, 9.81, 0.1, 3.0]
-    kp, kd, target = [15.0, 25.0], [3.0, 4.0], [0.5, -0.8]
-    r = Robot(lib, "pair", 2, p, 1, kp, kd, target, gravity=True)
-    m1, l1, m2, l2, g, b, k = p
-
-    def rhs(t, y):
-        q, qd = y[:2], y[2:]
-        grav = np.array([m1 * g * l1 * math.sin(q[0]) + k * (q[0] - q[1]),
-                         m2 * g * l2 * math.sin(q[1]) - k * (q[0] - q[1])])  # fmt: skip
-        tau = -np.array(kp) * (q - target) - np.array(kd) * qd + grav
-        spring = k * (q[0] - q[1])
-        qdd = np.array([
-            (tau[0] - b * qd[0] - m1 * g * l1 * math.sin(q[0]) - spring) / (m1 * l1 * l1),
-            (tau[1] - b * qd[1] - m2 * g * l2 * math.sin(q[1]) + spring) / (m2 * l2 * l2),
-        ])  # fmt: skip
-        return np.concatenate([qd, qdd])
-
-    y0 = [0.0, 0.3, 0.0, 0.0]
-    t_eval = np.linspace(0.0, 4.0, 41)
-    ref, _, nacc, nrej = scipy_rk45(rhs, y0, 0.0, 4.0, t_eval, 1e-8, 1e-10)
-    rc, out, st = run_dopri5(
-        lib, "gagen_robot_rhs", r.addr, y0, 0.0, 4.0, t_eval, rtol=1e-8, atol=1e-10
-    )
-    assert rc == 0
-    assert (st.nfev, st.naccepted, st.nrejected) == (ref.nfev, nacc, nrej)
-    np.testing.assert_allclose(out, ref.y.T, rtol=1e-9, atol=1e-11)
-    np.testing.assert_allclose(out[-1, :2], target, atol=1e-3)
-
-
-def test_model_error_code_propagates_through_robot_rhs(lib):
-    r = Robot(lib, "pend", 1, [0.0, 0.8, 9.81, 0.05], 1, kp=[1.0], kd=[1.0], target=[0.0])
-    rc, out, st = run_dopri5(lib, "gagen_robot_rhs", r.addr, [0.1, 0.0], 0.0, 1.0, [0.5, 1.0])
-    assert rc == 3 and st.nfev == 1
-    assert np.isnan(out).all()

@@ -6,6 +6,8 @@ GAGEN_KERNEL
 void rrr_inverse_dynamics(const double *q, const double *qd, const double *qdd,
                                   const double *p, double *tau)
 {
+    double sn1, cs1, sn2, cs2;
+    gagen_sincos2(q[1], q[2], &sn1, &cs1, &sn2, &cs2);
     const double t0 = qd[0]*qd[0];
     const double t2 = qd[1]*qd[1];
     const double t3 = p[2]*t2;
@@ -16,11 +18,11 @@ void rrr_inverse_dynamics(const double *q, const double *qd, const double *qdd,
     const double t8 = t4*p[5];
     const double t9 = t5*p[6];
     const double t10 = (1.0/2.0)*p[13];
-    const double t14 = gagen_cos(q[1]);
+    const double t14 = cs1;
     const double t15 = p[1]*t14;
     const double t16 = p[2]*t14;
     const double t17 = p[12]*t14;
-    const double t18 = gagen_sin(q[1]);
+    const double t18 = sn1;
     const double t19 = p[1]*t18;
     const double t20 = p[11]*t18;
     const double t21 = t18*qd[0];
@@ -43,8 +45,8 @@ void rrr_inverse_dynamics(const double *q, const double *qd, const double *qdd,
     const double t41 = t40*p[5];
     const double t42 = (1.0/2.0)*p[2]*t21*qd[1] - 1.0/2.0*t39;
     const double t44 = t29 + t4*t25;
-    const double t45 = gagen_cos(q[2]);
-    const double t46 = gagen_sin(q[2]);
+    const double t45 = cs2;
+    const double t46 = sn2;
     const double t47 = t45*t18 + t46*t14;
     const double t48 = p[14]*t47;
     const double t49 = t45*t14 - t46*t18;
@@ -102,6 +104,8 @@ void rrr_inverse_dynamics(const double *q, const double *qd, const double *qdd,
 
 void rrr_energy(const double *q, const double *qd, const double *p, double *TV)
 {
+    double sn1, cs1, sn2, cs2;
+    gagen_sincos2(q[1], q[2], &sn1, &cs1, &sn2, &cs2);
     const double t0 = qd[0]*qd[0];
     const double t1 = (1.0/2.0)*p[1];
     const double t2 = qd[1]*qd[1];
@@ -109,10 +113,10 @@ void rrr_energy(const double *q, const double *qd, const double *p, double *TV)
     const double t5 = (1.0/2.0)*p[3];
     const double t7 = (1.0/2.0)*p[6];
     const double t10 = (1.0/2.0)*p[13];
-    const double t14 = gagen_cos(q[1]);
+    const double t14 = cs1;
     const double t15 = p[1]*t14;
     const double t16 = p[2]*t14;
-    const double t18 = gagen_sin(q[1]);
+    const double t18 = sn1;
     const double t19 = p[1]*t18;
     const double t21 = t18*qd[0];
     const double t22 = t14*qd[0];
@@ -123,8 +127,8 @@ void rrr_energy(const double *q, const double *qd, const double *p, double *TV)
     const double t35 = p[2] + t34;
     const double t36 = -t19;
     const double t40 = -p[1] - 1.0/2.0*t16;
-    const double t45 = gagen_cos(q[2]);
-    const double t46 = gagen_sin(q[2]);
+    const double t45 = cs2;
+    const double t46 = sn2;
     const double t49 = t45*t14 - t46*t18;
     const double t51 = -p[1] - t16;
     const double t52 = p[2]*t46;
@@ -153,17 +157,19 @@ void rrr_energy(const double *q, const double *qd, const double *p, double *TV)
 GAGEN_KERNEL
 void rrr_gravity(const double *q, const double *p, double *G)
 {
+    double sn1, cs1, sn2, cs2;
+    gagen_sincos2(q[1], q[2], &sn1, &cs1, &sn2, &cs2);
     const double t4 = (1.0/2.0)*p[2];
     const double t5 = (1.0/2.0)*p[3];
     const double t8 = t4*p[5];
     const double t9 = t5*p[6];
-    const double t14 = gagen_cos(q[1]);
-    const double t18 = gagen_sin(q[1]);
+    const double t14 = cs1;
+    const double t18 = sn1;
     const double t31 = -t18*p[0];
     const double t32 = -t14*p[0];
     const double t33 = t32*t8;
-    const double t45 = gagen_cos(q[2]);
-    const double t46 = gagen_sin(q[2]);
+    const double t45 = cs2;
+    const double t46 = sn2;
     const double t52 = p[2]*t46;
     const double t54 = p[2]*t45;
     const double t64 = t32*t46 + t45*t31;

@@ -4,15 +4,17 @@
 
 void rrr_mass_matrix(const double *q, const double *p, double *M)
 {
+    double sn1, cs1, sn2, cs2;
+    gagen_sincos2(q[1], q[2], &sn1, &cs1, &sn2, &cs2);
     const double t5 = (1.0/2.0)*p[3];
     const double t6 = (1.0/4.0)*p[1]*p[1]*p[4];
     const double t7 = (1.0/2.0)*p[6];
-    const double t14 = gagen_cos(q[1]);
+    const double t14 = cs1;
     const double t16 = p[2]*t14;
-    const double t18 = gagen_sin(q[1]);
+    const double t18 = sn1;
     const double t40 = -p[1] - 1.0/2.0*t16;
-    const double t45 = gagen_cos(q[2]);
-    const double t46 = gagen_sin(q[2]);
+    const double t45 = cs2;
+    const double t46 = sn2;
     const double t47 = t45*t18 + t46*t14;
     const double t49 = t45*t14 - t46*t18;
     const double t51 = -p[1] - t16;

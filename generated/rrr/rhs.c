@@ -5,6 +5,8 @@
 void rrr_forcing(const double *q, const double *qd, const double *tau, const double *p,
                          double *F)
 {
+    double sn1, cs1, sn2, cs2;
+    gagen_sincos2(q[1], q[2], &sn1, &cs1, &sn2, &cs2);
     const double t0 = qd[0]*qd[0];
     const double t2 = qd[1]*qd[1];
     const double t3 = p[2]*t2;
@@ -13,11 +15,11 @@ void rrr_forcing(const double *q, const double *qd, const double *tau, const dou
     const double t7 = (1.0/2.0)*p[6];
     const double t8 = t4*p[5];
     const double t9 = t5*p[6];
-    const double t14 = gagen_cos(q[1]);
+    const double t14 = cs1;
     const double t15 = p[1]*t14;
     const double t16 = p[2]*t14;
     const double t17 = p[12]*t14;
-    const double t18 = gagen_sin(q[1]);
+    const double t18 = sn1;
     const double t19 = p[1]*t18;
     const double t20 = p[11]*t18;
     const double t21 = t18*qd[0];
@@ -40,8 +42,8 @@ void rrr_forcing(const double *q, const double *qd, const double *tau, const dou
     const double t41 = t40*p[5];
     const double t42 = (1.0/2.0)*p[2]*t21*qd[1] - 1.0/2.0*t39;
     const double t44 = t29 + t4*t25;
-    const double t45 = gagen_cos(q[2]);
-    const double t46 = gagen_sin(q[2]);
+    const double t45 = cs2;
+    const double t46 = sn2;
     const double t47 = t45*t18 + t46*t14;
     const double t48 = p[14]*t47;
     const double t49 = t45*t14 - t46*t18;
@@ -101,6 +103,8 @@ int rrr_forward_dynamics(const double *q, const double *qd, const double *tau,
                                  const double *p, double *qdd)
 {
     double M[9], F[3];
+    double sn1, cs1, sn2, cs2;
+    gagen_sincos2(q[1], q[2], &sn1, &cs1, &sn2, &cs2);
     const double t0 = qd[0]*qd[0];
     const double t2 = qd[1]*qd[1];
     const double t3 = p[2]*t2;
@@ -110,11 +114,11 @@ int rrr_forward_dynamics(const double *q, const double *qd, const double *tau,
     const double t7 = (1.0/2.0)*p[6];
     const double t8 = t4*p[5];
     const double t9 = t5*p[6];
-    const double t14 = gagen_cos(q[1]);
+    const double t14 = cs1;
     const double t15 = p[1]*t14;
     const double t16 = p[2]*t14;
     const double t17 = p[12]*t14;
-    const double t18 = gagen_sin(q[1]);
+    const double t18 = sn1;
     const double t19 = p[1]*t18;
     const double t20 = p[11]*t18;
     const double t21 = t18*qd[0];
@@ -137,8 +141,8 @@ int rrr_forward_dynamics(const double *q, const double *qd, const double *tau,
     const double t41 = t40*p[5];
     const double t42 = (1.0/2.0)*p[2]*t21*qd[1] - 1.0/2.0*t39;
     const double t44 = t29 + t4*t25;
-    const double t45 = gagen_cos(q[2]);
-    const double t46 = gagen_sin(q[2]);
+    const double t45 = cs2;
+    const double t46 = sn2;
     const double t47 = t45*t18 + t46*t14;
     const double t48 = p[14]*t47;
     const double t49 = t45*t14 - t46*t18;
@@ -197,11 +201,12 @@ int rrr_forward_dynamics(const double *q, const double *qd, const double *tau,
     F[0] = -t37*t20 - t38*t17 + (-t42*t41 - t73*t48) + (-t74*t50 - t82*t76 + (-t101 + tau[0]));
     F[1] = -t44*t8 - t90 - t7*(t83*t53 + t84*t79) + (t97 + t81 + tau[1]);
     F[2] = -t84*t9 + t97 + (t67 + tau[2]);
+    double Dinv[3];
     /* M = L D L^T, unrolled, skipping M's structural zeros. M's lower triangle is overwritten
        with U = L D (not L): then every update is (U*U)*Dinv, whose product of U's is ready
        before the pivot's reciprocal, which keeps the dependency chains short. A pivot that
        is not clearly positive means M is not positive definite. */
-    double D[3], Dinv[3];
+    double D[3];
     D[0] = M[0];
     if (!(D[0] > 1e-13 * M[0]) || !(M[0] > 0.0))
         return RRR_ERR_NOT_POSITIVE_DEFINITE;

@@ -28,6 +28,8 @@
 #ifndef GAGEN_RRR_H
 #define GAGEN_RRR_H
 
+#include "integrator.h"
+
 #define RRR_NQ 3
 #define RRR_NP 16
 /* returned by rrr_forward_dynamics when M(q) is singular or not positive definite */
@@ -55,6 +57,21 @@ void rrr_gravity(const double *q, const double *p, double *G);
  * compensation needs, at the cost of one forward dynamics). Returns as forward_dynamics. */
 int rrr_forward_dynamics_gc(const double *q, const double *qd, const double *u,
                                     const double *p, double *qdd);
+/* Simulates the robot from y0 = [q0, qd0] (6 entries) over [t0, t1] under the
+ * controller c, with method GAGEN_METHOD_DOPRI5 (the steps of scipy's RK45 at rtol, atol:
+ * 6 entries; first_step, max_step and max_steps as for gagen_dopri5) or
+ * GAGEN_METHOD_RK4 (step h). Writes y at the n_eval times t_eval into y_out (n_eval rows of
+ * 6), and returns 0, an integrator's GAGEN_ERR_*, or
+ * RRR_ERR_NOT_POSITIVE_DEFINITE; on failure the rows not reached are NaN. */
+int rrr_simulate(int method, const gagen_control *c, const double *p, double t0,
+                         double t1, const double *y0, double rtol, const double *atol,
+                         double first_step, double max_step, long max_steps, double h,
+                         const double *t_eval, int n_eval, double *y_out,
+                         gagen_ode_stats *stats);
+/* The torques of controller c at m samples: times t, states y (m rows of 6);
+ * tau has m rows of 3. Returns 0, or GAGEN_ERR_BAD_ARG for an unknown controller. */
+int rrr_control_torques(const gagen_control *c, const double *p, long m,
+                                const double *t, const double *y, double *tau);
 /* TV[0] = kinetic energy, TV[1] = potential energy (zero at the world origin) */
 void rrr_energy(const double *q, const double *qd, const double *p, double *TV);
 

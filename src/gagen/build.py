@@ -56,7 +56,7 @@ class BuildReport:
 
 
 # The modules whose code decides what the generated sources say.
-GENERATOR_MODULES = ("kinematics.py", "gibbs_appell.py", "codegen.py")
+GENERATOR_MODULES = ("kinematics.py", "gibbs_appell.py", "cse.py", "stage_split.py", "codegen.py")
 
 
 def generator_digest() -> str:

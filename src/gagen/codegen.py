@@ -1,18 +1,16 @@
-"""C code generation: one CSE pass over every output, printed into C99 through templates.
+"""C code generation: the CSE'd equations printed into C99 through templates.
 
-The derivation's intermediates and all outputs (mass matrix, forcing, inverse dynamics,
-energy) go through `sympy.cse` together, so a subexpression shared anywhere is
-computed once. Each C function then gets the assignments its outputs depend on, in one
-dependency order shared by all functions.
+Each C function gets the assignments its outputs depend on (cse.py), printed once and
+shared by every function that needs them. The robot's simulation (simulation.c) evaluates
+forward dynamics in a position and a velocity stage (stage_split.py) inside integrators
+specialised for the model (templates/gagen_second_order.h).
 """
 
 from __future__ import annotations
 
 import hashlib
-import heapq
 import re
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
@@ -22,15 +20,18 @@ from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE, precedence
 
 from . import __version__
+from .cse import CSEResult
 from .gibbs_appell import Equations
+from .stage_split import StageSplit, split_stages
 
-TEMPLATE_FILES = ("macros.j2", "header.h.j2", "mass_matrix.c.j2", "rhs.c.j2", "rhs_gc.c.j2",
-                  "inverse_dynamics.c.j2", "wrapper.pyx.j2", "integrator.c", "integrator.h",
-                  "gagen_math.h")
 # copied verbatim next to the generated sources
-COPIED_FILES = ("integrator.c", "integrator.h", "gagen_math.h")
+COPIED_FILES = ("integrator.c", "integrator.h", "gagen_ode.h", "gagen_second_order.h",
+                "gagen_math.h")
+TEMPLATE_FILES = ("macros.j2", "header.h.j2", "mass_matrix.c.j2", "rhs.c.j2",
+                  "simulation.c.j2", "inverse_dynamics.c.j2", "wrapper.pyx.j2") + COPIED_FILES
 # the C files of a model, all compiled into its module
-MODEL_C_FILES = ("mass_matrix.c", "rhs.c", "rhs_gc.c", "inverse_dynamics.c", "integrator.c")
+MODEL_C_FILES = ("mass_matrix.c", "rhs.c", "simulation.c", "inverse_dynamics.c",
+                 "integrator.c")
 _C_KEYWORDS = frozenset({
     "auto", "break", "case", "char", "const", "continue", "default", "do", "double", "else",
     "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register",
@@ -69,16 +70,43 @@ def _balanced_sum(terms: list[tuple[bool, str]]) -> str:
 
 
 class GagenCPrinter(C99CodePrinter):
-    """C99 printer that names symbols by array slot and avoids pow() for small powers."""
+    """C99 printer that names symbols by array slot and avoids pow() for small powers.
 
-    def __init__(self, names: dict[sp.Symbol, str]):
+    sin and cos of a coordinate q[k] print as the locals sn<k> and cs<k>, which each
+    function computes first (`trig_prelude`), two coordinates at a time.
+    """
+
+    def __init__(self, names: dict[sp.Symbol, str], coordinates: list[sp.Symbol]):
         # gagen_math.h's sin and cos: about twice as fast as libm's, within 1 ulp
         super().__init__({"strict": False,
                           "user_functions": {"sin": "gagen_sin", "cos": "gagen_cos"}})
         self._names = names
+        self._angles = {q: k for k, q in enumerate(coordinates)}
 
     def _print_Symbol(self, expr):
         return self._names[expr]
+
+    def _print_sin(self, expr):
+        k = self._angles.get(expr.args[0])
+        return f"sn{k}" if k is not None else self._print_Function(expr)
+
+    def _print_cos(self, expr):
+        k = self._angles.get(expr.args[0])
+        return f"cs{k}" if k is not None else self._print_Function(expr)
+
+    def trig_prelude(self, exprs) -> list[str]:
+        """C statements that set sn<k>, cs<k> for the coordinates whose sin or cos `exprs` use."""
+        used = sorted({self._angles[f.args[0]] for e in exprs for f in e.atoms(sp.sin, sp.cos)
+                       if f.args[0] in self._angles})
+        if not used:
+            return []
+        lines = ["double " + ", ".join(f"sn{k}, cs{k}" for k in used) + ";"]
+        for a, b in zip(used[::2], used[1::2]):
+            lines.append(f"gagen_sincos2(q[{a}], q[{b}], &sn{a}, &cs{a}, &sn{b}, &cs{b});")
+        if len(used) % 2:
+            k = used[-1]
+            lines.append(f"gagen_sincos(q[{k}], &sn{k}, &cs{k});")
+        return lines
 
     def _print_Add(self, expr, order=None):
         terms = []
@@ -106,16 +134,10 @@ class GagenCPrinter(C99CodePrinter):
 
 
 @dataclass
-class Assignment:
-    symbol: sp.Symbol
-    expr: sp.Expr
-    deps: frozenset = field(default_factory=frozenset)
-
-
-@dataclass
 class CodeBlock:
-    """The straight-line code of one C function: local assignments, then outputs."""
+    """The straight-line code of one C function: sin and cos, local assignments, outputs."""
 
+    prelude: list[str]
     locals: list[tuple[str, str]]
     outputs: list[tuple[str, str]]
 
@@ -128,71 +150,6 @@ class GeneratedCode:
     cse_seconds: float
     module_name: str
     ident: str
-
-
-class CSEResult:
-    """All assignments in one dependency order, and the reduced output expressions."""
-
-    def __init__(self, eqs: Equations):
-        outputs = eqs.outputs()
-        defs = eqs.intermediates
-        flat = [e for v in outputs.values() for e in v]
-        self.ops_before = _ops(e for _, e in defs) + _ops(flat)
-        start = time.perf_counter()
-        temps, reduced = sp.cse([e for _, e in defs] + flat,
-                                symbols=sp.numbered_symbols("_x"), order="canonical")
-        self.seconds = time.perf_counter() - start
-        reduced_defs, reduced_out = reduced[: len(defs)], reduced[len(defs):]
-        assignments = [Assignment(s, e) for s, e in temps]
-        assignments += [Assignment(s, e) for (s, _), e in zip(defs, reduced_defs)]
-        self.assignments = _dependency_order(assignments)
-        self.outputs: dict[str, list[sp.Expr]] = {}
-        k = 0
-        for key, values in outputs.items():
-            self.outputs[key] = reduced_out[k: k + len(values)]
-            k += len(values)
-        self.ops_after = _ops(a.expr for a in self.assignments) + _ops(reduced_out)
-
-    def needed(self, exprs) -> list[Assignment]:
-        """The assignments these expressions depend on, in the shared order."""
-        defined = {a.symbol: a for a in self.assignments}
-        need: set[sp.Symbol] = set()
-        stack = [s for e in exprs for s in e.free_symbols if s in defined]
-        while stack:
-            s = stack.pop()
-            if s not in need:
-                need.add(s)
-                stack.extend(d for d in defined[s].deps if d not in need)
-        return [a for a in self.assignments if a.symbol in need]
-
-
-def _ops(exprs) -> int:
-    return sum(sp.count_ops(e) for e in exprs)
-
-
-def _dependency_order(assignments: list[Assignment]) -> list[Assignment]:
-    """Topological order; among ready assignments the earliest given comes first."""
-    by_symbol = {a.symbol: k for k, a in enumerate(assignments)}
-    for a in assignments:
-        a.deps = frozenset(s for s in a.expr.free_symbols if s in by_symbol)
-    waiting = {k: len(a.deps) for k, a in enumerate(assignments)}
-    users: dict[int, list[int]] = {k: [] for k in range(len(assignments))}
-    for k, a in enumerate(assignments):
-        for d in a.deps:
-            users[by_symbol[d]].append(k)
-    ready = [k for k, count in waiting.items() if count == 0]
-    heapq.heapify(ready)
-    order = []
-    while ready:
-        k = heapq.heappop(ready)
-        order.append(assignments[k])
-        for u in users[k]:
-            waiting[u] -= 1
-            if waiting[u] == 0:
-                heapq.heappush(ready, u)
-    if len(order) != len(assignments):
-        raise RuntimeError("cyclic intermediate definitions")
-    return order
 
 
 def _comment_safe(text) -> str:
@@ -236,13 +193,61 @@ def _symbol_names(eqs: Equations, cse: CSEResult) -> dict[sp.Symbol, str]:
 def _block(cse: CSEResult, printer: GagenCPrinter, exprs: list[sp.Expr],
            targets: list[str], printed: dict[sp.Symbol, str]) -> CodeBlock:
     """One function's code; `printed` keeps each assignment's C text for the other blocks."""
+    return _assignments_block(printer, cse.needed(exprs), exprs, targets, printed)
+
+
+def _assignments_block(printer: GagenCPrinter, assignments, exprs: list[sp.Expr],
+                       targets: list[str], printed: dict[sp.Symbol, str] | None = None
+                       ) -> CodeBlock:
+    """The code of given assignments (their text cached in `printed` if given) and outputs."""
     local = []
-    for a in cse.needed(exprs):
-        if a.symbol not in printed:
-            printed[a.symbol] = printer.doprint(a.expr)
-        local.append((printer._names[a.symbol], printed[a.symbol]))
+    for a in assignments:
+        if printed is None:
+            text = printer.doprint(a.expr)
+        else:
+            text = printed.get(a.symbol) or printed.setdefault(a.symbol, printer.doprint(a.expr))
+        local.append((printer._names[a.symbol], text))
     outputs = [(t, printer.doprint(e)) for t, e in zip(targets, exprs)]
-    return CodeBlock(locals=local, outputs=outputs)
+    prelude = printer.trig_prelude([a.expr for a in assignments] + list(exprs))
+    return CodeBlock(prelude=prelude, locals=local, outputs=outputs)
+
+
+@dataclass
+class Stages:
+    """forward dynamics under u + g(q) as a position and a velocity stage (simulation.c)."""
+
+    position: CodeBlock
+    velocity: CodeBlock
+    interface: list[tuple[int, str]]  # (slot in S, local name)
+    size: int  # doubles of S: interface, g(q), 1/D, M (holding U = L D)
+    gravity_at: int
+    dinv_at: int
+    mass_at: int
+
+
+def _stages(eqs: Equations, cse: CSEResult, printer: GagenCPrinter,
+            printed: dict[sp.Symbol, str], targets: dict[str, list[str]]) -> Stages:
+    out = cse.outputs
+    coords = eqs.coords
+    no_torque = {tau: sp.Integer(0) for tau in coords.tau}
+    free_forcing = [e.xreplace(no_torque) for e in out["forcing"]]
+    fixed_outputs = out["mass_matrix"] + out["gravity"]
+    split: StageSplit = split_stages(cse.needed(fixed_outputs + free_forcing), fixed_outputs,
+                                     free_forcing, set(coords.qd) | set(coords.tau))
+    hoisted = [a for a in split.position if a.symbol not in printer._names]
+    printer._names.update({a.symbol: f"h{k}" for k, a in enumerate(hoisted)})
+    used = set().union(*(a.expr.free_symbols for a in split.velocity),
+                       *(e.free_symbols for e in split.velocity_outputs))
+    if used & set(coords.tau):
+        raise RuntimeError("internal error: the velocity stage refers to the joint torques")
+    position = _assignments_block(printer, split.position, fixed_outputs,
+                                  targets["mass_matrix"] + targets["gravity"], printed)
+    velocity = _assignments_block(printer, split.velocity, split.velocity_outputs,
+                                  targets["forcing"])
+    n, ni = eqs.n, len(split.interface)
+    interface = [(k, printer._names[s]) for k, s in enumerate(split.interface)]
+    return Stages(position, velocity, interface, size=ni + 2 * n + n * n, gravity_at=ni,
+                  dinv_at=ni + n, mass_at=ni + 2 * n)
 
 
 def factor_pattern(n: int, zero: set[tuple[int, int]]) -> set[tuple[int, int]]:
@@ -264,7 +269,7 @@ def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
     model = eqs.model
     ident = c_identifier(model.name)
     cse = CSEResult(eqs)
-    printer = GagenCPrinter(_symbol_names(eqs, cse))
+    printer = GagenCPrinter(_symbol_names(eqs, cse), list(eqs.coords.q))
     n = eqs.n
     lower = [(r, s) for r in range(n) for s in range(r + 1)]
     out = cse.outputs
@@ -272,8 +277,6 @@ def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
     printed: dict[sp.Symbol, str] = {}
     forcing_targets = [f"F[{r}]" for r in range(n)]
     gravity_targets = [f"G[{r}]" for r in range(n)]
-    no_torque = {tau: sp.Integer(0) for tau in eqs.coords.tau}
-    free_forcing = [e.xreplace(no_torque) for e in out["forcing"]]
     blocks = {
         "mass_matrix": _block(cse, printer, out["mass_matrix"], mass_targets, printed),
         "rhs": _block(cse, printer, out["mass_matrix"] + out["forcing"],
@@ -283,11 +286,10 @@ def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
                                    [f"tau[{r}]" for r in range(n)], printed),
         "energy": _block(cse, printer, out["energy"], ["TV[0]", "TV[1]"], printed),
         "gravity": _block(cse, printer, out["gravity"], gravity_targets, printed),
-        # M, F(q, qd, 0) and G(q) sharing one evaluation (forward_dynamics_gc): a feedback
-        # law that compensates gravity then costs the integrator no second model pass.
-        "terms": _block(cse, printer, out["mass_matrix"] + free_forcing + out["gravity"],
-                        mass_targets + forcing_targets + gravity_targets, printed),
     }
+    stages = _stages(eqs, cse, printer, printed, {"mass_matrix": mass_targets,
+                                                  "gravity": gravity_targets,
+                                                  "forcing": forcing_targets})
     zero = {(r, s) for (r, s), e in zip(lower, out["mass_matrix"]) if e == 0}
     context = {
         "model": model,
@@ -301,6 +303,7 @@ def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
         "lower": lower,
         "lnz": factor_pattern(n, zero),
         "blocks": blocks,
+        "stages": stages,
         "module_name": module_name,
         "key": key,
         "version": __version__,
@@ -311,7 +314,7 @@ def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
         f"{ident}.h": env.get_template("header.h.j2").render(context),
         "mass_matrix.c": env.get_template("mass_matrix.c.j2").render(context),
         "rhs.c": env.get_template("rhs.c.j2").render(context),
-        "rhs_gc.c": env.get_template("rhs_gc.c.j2").render(context),
+        "simulation.c": env.get_template("simulation.c.j2").render(context),
         "inverse_dynamics.c": env.get_template("inverse_dynamics.c.j2").render(context),
         f"{module_name}.pyx": env.get_template("wrapper.pyx.j2").render(context),
     }

@@ -87,8 +87,13 @@ def _default_grid(t0: float, t1: float) -> np.ndarray:
 
 
 def _vector(x, n: int, name: str) -> np.ndarray:
+    """x as n finite floats; an array that already is one is returned as it is (read only)."""
     if x is None:
         return np.zeros(n)
+    if type(x) is np.ndarray and x.dtype == np.float64 and x.shape == (n,):
+        if not all(map(math.isfinite, x.tolist())):
+            raise ValueError(f"{name} must be finite, got {x}")
+        return x
     if isinstance(x, (str, bytes)):
         raise TypeError(f"{name} must be an array of {n} numbers, got {type(x).__name__}")
     try:
@@ -205,7 +210,8 @@ def _atol(atol, n: int):
 
 def _pair(t_span):
     try:
-        t0, t1 = (float(t) for t in t_span)
+        t0, t1 = t_span
+        t0, t1 = float(t0), float(t1)
     except (TypeError, ValueError):
         raise ValueError(f"t_span must be a pair (t0, t1) of numbers, got {t_span!r}") from None
     if not (math.isfinite(t0) and math.isfinite(t1)):
@@ -303,11 +309,11 @@ def _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_e
                          "same Dormand-Prince 5(4) steps as 'dopri5')")
     te = _time_grid(t_eval, t0, t1, allow_steps=False)
     h = float(options.get("h", DEFAULT_RK4_STEP))
-    if method == "rk4" and not (np.isfinite(h) and h > 0):
+    if method == "rk4" and not (math.isfinite(h) and h > 0):
         raise ValueError(f"h must be a positive step size, got {h}")
     first_step = float(options.get("first_step") or 0.0)
-    max_step = options.get("max_step", np.inf)
-    max_step = 0.0 if max_step is None or not np.isfinite(max_step) else float(max_step)
+    max_step = options.get("max_step")
+    max_step = 0.0 if max_step is None or not math.isfinite(max_step) else float(max_step)
     max_steps = int(options.get("max_steps") or 0)
     if first_step < 0 or max_step < 0:
         raise ValueError("first_step and max_step must be positive")

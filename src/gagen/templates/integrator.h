@@ -1,5 +1,10 @@
 /*
- * gagen: generic ODE integrators and robot controllers (plain C99).
+ * gagen: generic ODE integrators, and the types of gagen's robot simulations (plain C99).
+ *
+ * gagen_dopri5 and gagen_rk4 integrate any ODE dy/dt = f(t, y) given as a function
+ * pointer.  A generated model's own simulation (<model>_simulate in <model>.h, from
+ * simulation.c) runs the same methods, step for step, specialised for the robot's
+ * [q, qd] state and its controllers (gagen_control below).
  *
  * Everything here is reentrant: no globals, no static mutable state, no
  * malloc.  The caller provides all scratch memory, so the same code can run
@@ -69,54 +74,31 @@ long gagen_rk4_work_size(int n); /* in doubles */
 
 /* ---- robot controllers ------------------------------------------------ */
 
-/* Model functions supplied by the generated code.  Return 0 or an error code
- * (e.g. singular mass matrix). */
-typedef int (*gagen_fd_fn)(const double *q, const double *qd, const double *tau,
-                           const double *p, double *qdd);
-typedef int (*gagen_id_fn)(const double *q, const double *qd, const double *qdd,
-                           const double *p, double *tau);
-/* Gravity torque g(q) = id(q, 0, 0), cheaper than the full inverse dynamics. */
-typedef int (*gagen_gravity_fn)(const double *q, const double *p, double *g);
-
 #define GAGEN_CTRL_NONE 0
 #define GAGEN_CTRL_PD 1
 #define GAGEN_CTRL_COMPUTED_TORQUE 2
 
+/* The integration methods of <model>_simulate. */
+#define GAGEN_METHOD_DOPRI5 0
+#define GAGEN_METHOD_RK4 1
+
+/*
+ * A feedback law tau(t, q, qd) of a robot with n coordinates:
+ *   GAGEN_CTRL_NONE:  tau = 0
+ *   GAGEN_CTRL_PD:    tau = -kp*(q - target) - kd*qd [+ g(q), the gravity torques]
+ *   GAGEN_CTRL_COMPUTED_TORQUE:
+ *                     tau = id(q, qd, qdd_r + kd*(qd_r - qd) + kp*(q_r - q)), with
+ *                     (q_r, qd_r, qdd_r) the eq. 11 motion from traj_q0 to traj_qf in traj_Tp
+ * The arrays have n entries; a NULL gain or target means zero.
+ */
 typedef struct {
-    int n;
-    gagen_fd_fn fd;
-    gagen_id_fn id;
-    gagen_gravity_fn gravity; /* optional: used for gravity compensation when not NULL */
-    /* Optional: qdd under tau + g(q) in one pass (fd with gravity compensation); a PD law
-     * with gravity compensation then costs one model evaluation instead of two. */
-    gagen_fd_fn fd_gc;
-    const double *p;
     int kind;                 /* GAGEN_CTRL_* */
-    const double *kp, *kd;    /* per-joint gains, length n; NULL means zero */
-    const double *target;     /* PD target q, length n; NULL means zero */
-    int gravity_compensation; /* PD: add gravity(q), or id(q, 0, 0), when nonzero */
-    /* Reference trajectory (paper eq. 11) for computed torque. */
+    const double *kp, *kd;    /* per-joint gains */
+    const double *target;     /* PD target q */
+    int gravity_compensation; /* PD: add g(q) when nonzero */
     const double *traj_q0, *traj_qf;
     double traj_Tp;
-    double *scratch; /* caller-provided, gagen_robot_scratch_size(n) doubles */
-} gagen_robot_ctx;
-
-long gagen_robot_scratch_size(int n); /* in doubles: 4n */
-
-/* gagen_ode_fn for y = [q, qd]: tau = controller(t, q, qd), qdd = fd(q, qd, tau). */
-int gagen_robot_rhs(void *ctx, double t, const double *y, double *dydt);
-
-/* PD:       tau = -kp*(q - target) - kd*qd [+ id(q, 0, 0)]
- * computed: tau = id(q, qd, qdd_r + kd*(qd_r - qd) + kp*(q_r - q))
- * Uses c->scratch[n..4n), so tau may point to c->scratch[0..n). */
-int gagen_controller_torque(gagen_robot_ctx *c, double t, const double *q, const double *qd,
-                            double *tau);
-
-/* Eq. 11: q_r(t) = q0 + (qf - q0)/Tp * (t - Tp/(2 pi) sin(2 pi t/Tp)) on [0, Tp],
- * held at q0 for t < 0 and at qf for t > Tp (zero velocity and acceleration).
- * qd and qdd may be NULL. */
-void gagen_eq11(const double *q0, const double *qf, double Tp, int n, double t, double *q,
-                double *qd, double *qdd);
+} gagen_control;
 
 #ifdef __cplusplus
 }

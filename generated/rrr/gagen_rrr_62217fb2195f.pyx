@@ -5,7 +5,7 @@
 
 import numpy as np
 cimport numpy as cnp
-from libc.math cimport isfinite
+from libc.math cimport NAN
 
 from gagen.dynamics import SingularMassMatrixError
 
@@ -21,26 +21,19 @@ cdef extern from "rrr.h" nogil:
                                       const double *p, double *tau)
     void rrr_energy(const double *q, const double *qd, const double *p, double *TV)
     void rrr_gravity(const double *q, const double *p, double *G)
-    int rrr_forward_dynamics_gc(const double *q, const double *qd, const double *u,
-                                        const double *p, double *qdd)
+    int rrr_simulate(int method, const gagen_control *c, const double *p, double t0,
+                             double t1, const double *y0, double rtol, const double *atol,
+                             double first_step, double max_step, long max_steps, double h,
+                             const double *t_eval, int n_eval, double *y_out,
+                             gagen_ode_stats *stats)
+    int rrr_control_torques(const gagen_control *c, const double *p, long m,
+                                    const double *t, const double *y, double *tau)
 
 cdef extern from "integrator.h" nogil:
-    ctypedef int (*gagen_ode_fn)(void *ctx, double t, const double *y, double *dydt)
-    ctypedef int (*gagen_fd_fn)(const double *q, const double *qd, const double *tau,
-                                const double *p, double *qdd)
-    ctypedef int (*gagen_id_fn)(const double *q, const double *qd, const double *qdd,
-                                const double *p, double *tau)
-    ctypedef int (*gagen_gravity_fn)(const double *q, const double *p, double *g)
     ctypedef struct gagen_ode_stats:
         long nfev, nsteps, naccepted, nrejected
         int status
-    ctypedef struct gagen_robot_ctx:
-        int n
-        gagen_fd_fn fd
-        gagen_id_fn id
-        gagen_gravity_fn gravity
-        gagen_fd_fn fd_gc
-        const double *p
+    ctypedef struct gagen_control:
         int kind
         const double *kp
         const double *kd
@@ -49,22 +42,11 @@ cdef extern from "integrator.h" nogil:
         const double *traj_q0
         const double *traj_qf
         double traj_Tp
-        double *scratch
-    int gagen_dopri5(gagen_ode_fn f, void *ctx, int n, double t0, double t1, const double *y0,
-                     double rtol, const double *atol, double first_step, double max_step,
-                     long max_steps, const double *t_eval, int n_eval, double *y_out,
-                     double *work, gagen_ode_stats *stats)
-    long gagen_dopri5_work_size(int n)
-    int gagen_rk4(gagen_ode_fn f, void *ctx, int n, double t0, double t1, const double *y0,
-                  double h, const double *t_eval, int n_eval, double *y_out, double *work,
-                  gagen_ode_stats *stats)
-    long gagen_rk4_work_size(int n)
-    long gagen_robot_scratch_size(int n)
-    int gagen_robot_rhs(void *ctx, double t, const double *y, double *dydt)
-    int gagen_controller_torque(gagen_robot_ctx *c, double t, const double *q, const double *qd,
-                                double *tau)
+    enum:
+        GAGEN_METHOD_DOPRI5
+        GAGEN_METHOD_RK4
 
-KEY = "eb89b7cadf78ce0c5e55c6fca16f52376740460f1f563b50249151af2a18fd3f"
+KEY = "62217fb2195f6fa5d78ec85b541a396afbdbc0e4d0dd036a3745c36e6b3a2124"
 MODEL_NAME = "rrr"
 COORDINATES = ("q1", "q2", "q3", )
 PARAMETER_NAMES = ("g", "L1", "L2", "L3", "m1", "m2", "m3", "I1x", "I1y", "I1z", "I2x", "I2y", "I2z", "I3x", "I3y", "I3z", )
@@ -73,8 +55,6 @@ PARAMETER_DEFAULTS = (9.81, 0.4, 0.4, 0.4, 60.0, 50.0, 40.0, 0.8, 0.075, 0.8, 0.
 cdef enum:
     NQ = 3
     NP = 16
-    # scratch of the C integrators for 2 NQ states (integrator.h: gagen_dopri5_work_size)
-    DOPRI5_WORK = 14 * 2 * NQ
 
 ctypedef int (*kernel3)(const double *, const double *, const double *, const double *,
                         double *) noexcept nogil
@@ -106,11 +86,6 @@ cdef int _energy(const double *a, const double *b, const double *c, const double
 cdef int _gravity(const double *a, const double *b, const double *c, const double *p,
                   double *out) noexcept nogil:
     rrr_gravity(a, p, out)
-    return 0
-
-
-cdef int _gravity_only(const double *q, const double *p, double *out) noexcept nogil:
-    rrr_gravity(q, p, out)
     return 0
 
 
@@ -283,9 +258,9 @@ cdef inline cnp.ndarray _matrix(Py_ssize_t rows, Py_ssize_t cols):
 cdef class CompiledSimulation:
     """The robot, its controller and gagen's C integrators, run without Python per step."""
 
-    cdef gagen_robot_ctx ctx
+    cdef gagen_control ctl
+    cdef const double *p
     cdef object _keep
-    cdef cnp.ndarray _scratch
 
     def __init__(self, CompiledModel model, p, int kind, kp=None, kd=None, target=None,
                  bint gravity_compensation=False, traj_q0=None, traj_qf=None,
@@ -294,112 +269,73 @@ cdef class CompiledSimulation:
         arrays = [params] + [_vector(v, NQ, name) for v, name in
                              ((kp, "kp"), (kd, "kd"), (target, "target"),
                               (traj_q0, "trajectory q0"), (traj_qf, "trajectory qf"))]
-        self._keep = arrays
-        self._scratch = np.zeros(gagen_robot_scratch_size(NQ))
-        self.ctx.n = NQ
-        self.ctx.fd = _forward
-        self.ctx.id = _inverse
-        self.ctx.gravity = _gravity_only
-        self.ctx.fd_gc = rrr_forward_dynamics_gc
-        self.ctx.p = _data(arrays[0])
-        self.ctx.kind = kind
-        self.ctx.kp = _data(arrays[1])
-        self.ctx.kd = _data(arrays[2])
-        self.ctx.target = _data(arrays[3])
-        self.ctx.gravity_compensation = gravity_compensation
-        self.ctx.traj_q0 = _data(arrays[4])
-        self.ctx.traj_qf = _data(arrays[5])
-        self.ctx.traj_Tp = traj_Tp
-        self.ctx.scratch = _data(self._scratch)
-
-    cdef tuple _integrate(self, str method, double t0, double t1, cnp.ndarray y0,
-                          cnp.ndarray te, double rtol, atol, double first_step,
-                          double max_step, long max_steps, double h):
-        """Run the C integrator: (y at te (m, 2n), status, stats dict)."""
-        cdef double at[2 * NQ]
-        cdef double work[DOPRI5_WORK]  # the larger of the two
-        cdef Py_ssize_t i
-        cdef bint dopri = method == "dopri5"
-        if not dopri and method != "rk4":
-            raise ValueError(f"unknown compiled method '{method}' (dopri5 or rk4)")
-        if gagen_dopri5_work_size(2 * NQ) > DOPRI5_WORK or gagen_rk4_work_size(2 * NQ) > DOPRI5_WORK:
-            raise RuntimeError("integrator.c needs more scratch memory than the wrapper provides")
-        if isinstance(atol, float):
-            for i in range(2 * NQ):
-                at[i] = atol
-        else:
-            atol = _vector(atol, 2 * NQ, "atol")
-            for i in range(2 * NQ):
-                at[i] = (<double *>cnp.PyArray_DATA(<cnp.ndarray>atol))[i]
-        cdef int m = te.size
-        cdef cnp.ndarray out = _matrix(m, 2 * NQ)
-        cdef gagen_ode_stats stats
-        cdef int status
-        cdef double *py = _data(y0)
-        cdef double *pte = _data(te)
-        cdef double *pout = _data(out)
-        with nogil:
-            if dopri:
-                status = gagen_dopri5(gagen_robot_rhs, &self.ctx, 2 * NQ, t0, t1, py, rtol, at,
-                                      first_step, max_step, max_steps, pte, m, pout, work,
-                                      &stats)
-            else:
-                status = gagen_rk4(gagen_robot_rhs, &self.ctx, 2 * NQ, t0, t1, py, h, pte, m,
-                                   pout, work, &stats)
-        info = {"nfev": stats.nfev, "nsteps": stats.nsteps, "naccepted": stats.naccepted,
-                "nrejected": stats.nrejected}
-        return out, status, info
-
-    def integrate(self, str method, double t0, double t1, y0, t_eval, double rtol=1e-6,
-                  atol=1e-8, double first_step=0.0, double max_step=0.0, long max_steps=0,
-                  double h=1e-3):
-        """Integrate from t0 to t1; return (y at t_eval (m, 2n), status, stats dict)."""
-        return self._integrate(method, t0, t1, _vector(y0, 2 * NQ, "y0"),
-                               np.ascontiguousarray(t_eval, dtype=np.float64), rtol, atol,
-                               first_step, max_step, max_steps, h)
+        self._keep = arrays  # the C structure points into them
+        self.p = _data(arrays[0])
+        self.ctl.kind = kind
+        self.ctl.kp = _data(arrays[1])
+        self.ctl.kd = _data(arrays[2])
+        self.ctl.target = _data(arrays[3])
+        self.ctl.gravity_compensation = gravity_compensation
+        self.ctl.traj_q0 = _data(arrays[4])
+        self.ctl.traj_qf = _data(arrays[5])
+        self.ctl.traj_Tp = traj_Tp
 
     def run(self, str method, double t0, double t1, q0, qd0, t_eval, double rtol=1e-6,
             atol=1e-8, double first_step=0.0, double max_step=0.0, long max_steps=0,
             double h=1e-3):
-        """Integrate from (q0, qd0), then split the samples and add the controller's torques.
+        """Integrate from (q0, qd0) and add the controller's torques at the samples.
 
         Returns (q, qd, tau: fresh (m, n) arrays, status, torque status, stats dict); on a
         failed integration the rows not reached are NaN and so is tau."""
+        cdef int code
+        if method == "dopri5":
+            code = GAGEN_METHOD_DOPRI5
+        elif method == "rk4":
+            code = GAGEN_METHOD_RK4
+        else:
+            raise ValueError(f"unknown compiled method '{method}' (dopri5 or rk4)")
+        cdef double at[2 * NQ]
+        cdef double y0[2 * NQ]
+        cdef Py_ssize_t i, r
+        cdef cnp.ndarray a
         cdef cnp.ndarray q_0 = _vector(q0, NQ, "q0"), qd_0 = _vector(qd0, NQ, "qd0")
-        cdef cnp.ndarray y0 = cnp.PyArray_EMPTY(1, [2 * NQ], cnp.NPY_DOUBLE, 0)
-        cdef Py_ssize_t i, k
         for i in range(NQ):
-            (<double *>cnp.PyArray_DATA(y0))[i] = (<double *>cnp.PyArray_DATA(q_0))[i]
-            (<double *>cnp.PyArray_DATA(y0))[NQ + i] = (<double *>cnp.PyArray_DATA(qd_0))[i]
+            y0[i] = _data(q_0)[i]
+            y0[NQ + i] = _data(qd_0)[i]
+        if type(atol) is float:
+            for i in range(2 * NQ):
+                at[i] = <double>atol
+        else:
+            a = _vector(atol, 2 * NQ, "atol")
+            for i in range(2 * NQ):
+                at[i] = _data(a)[i]
         cdef cnp.ndarray te = np.ascontiguousarray(t_eval, dtype=np.float64)
-        y, status, info = self._integrate(method, t0, t1, y0, te, rtol, atol, first_step,
-                                          max_step, max_steps, h)
-        cdef Py_ssize_t m = cnp.PyArray_DIM(<cnp.ndarray>y, 0)
+        cdef int m = cnp.PyArray_SIZE(te)
+        cdef cnp.ndarray y = _matrix(m, 2 * NQ)
         cdef cnp.ndarray q = _matrix(m, NQ), qd = _matrix(m, NQ), tau = _matrix(m, NQ)
-        cdef double *py = _data(<cnp.ndarray>y)
+        cdef double *pt = _data(te)
+        cdef double *py = _data(y)
         cdef double *pq = _data(q)
         cdef double *pqd = _data(qd)
-        for i in range(m * NQ):
-            k = (i // NQ) * 2 * NQ + i % NQ
-            pq[i] = py[k]
-            pqd[i] = py[k + NQ]
-        cdef int tstatus = 0
-        if status == 0:
-            tstatus = self._torques(_data(te), py, m, _data(tau))
-        else:
-            tau.fill(np.nan)
+        cdef double *ptau = _data(tau)
+        cdef gagen_ode_stats stats
+        cdef int status, tstatus = 0
+        with nogil:
+            status = rrr_simulate(code, &self.ctl, self.p, t0, t1, y0, rtol, at,
+                                          first_step, max_step, max_steps, h, pt, m, py,
+                                          &stats)
+            for r in range(m):
+                for i in range(NQ):
+                    pq[r * NQ + i] = py[r * 2 * NQ + i]
+                    pqd[r * NQ + i] = py[r * 2 * NQ + NQ + i]
+            if status == 0:
+                tstatus = rrr_control_torques(&self.ctl, self.p, m, pt, py, ptau)
+            else:
+                for i in range(m * NQ):
+                    ptau[i] = NAN
+        info = {"nfev": stats.nfev, "nsteps": stats.nsteps, "naccepted": stats.naccepted,
+                "nrejected": stats.nrejected}
         return q, qd, tau, status, tstatus, info
-
-    cdef int _torques(self, const double *t, const double *y, Py_ssize_t m,
-                      double *tau) noexcept nogil:
-        cdef Py_ssize_t i
-        cdef int status
-        for i in range(m):
-            status = gagen_controller_torque(&self.ctx, t[i], y + 2 * NQ * i,
-                                             y + 2 * NQ * i + NQ, tau + NQ * i)
-            if status:
-                return status
-        return 0
 
     def torques(self, t, y):
         """The controller's torques at times t (m,) and states y (m, 2n): (tau, status)."""
@@ -414,7 +350,7 @@ cdef class CompiledSimulation:
         cdef double *py = _data(yy)
         cdef double *pr = _data(res)
         with nogil:
-            status = self._torques(pt, py, m, pr)
+            status = rrr_control_torques(&self.ctl, self.p, m, pt, py, pr)
         return res, status
 
 
