@@ -223,6 +223,16 @@ static void gagen_so_inverse(const double *q, const double *qd, const double *qd
 #define GAGEN_SO_GRAVITY 23
 #include "gagen_second_order.h"
 
+int rrr_forward_dynamics(const double *q, const double *qd, const double *tau,
+                                 const double *p, double *qdd)
+{
+    double S[GAGEN_SO_NS];
+    int rc = gagen_so_position(q, p, S);
+    if (rc != 0) return rc;
+    gagen_so_velocity(S, q, qd, tau, p, qdd);
+    return 0;
+}
+
 int rrr_forward_dynamics_gc(const double *q, const double *qd, const double *u,
                                     const double *p, double *qdd)
 {

@@ -279,8 +279,6 @@ def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
     gravity_targets = [f"G[{r}]" for r in range(n)]
     blocks = {
         "mass_matrix": _block(cse, printer, out["mass_matrix"], mass_targets, printed),
-        "rhs": _block(cse, printer, out["mass_matrix"] + out["forcing"],
-                      mass_targets + forcing_targets, printed),
         "forcing": _block(cse, printer, out["forcing"], forcing_targets, printed),
         "inverse_dynamics": _block(cse, printer, out["inverse_dynamics"],
                                    [f"tau[{r}]" for r in range(n)], printed),

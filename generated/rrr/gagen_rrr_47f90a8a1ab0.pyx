@@ -46,7 +46,7 @@ cdef extern from "integrator.h" nogil:
         GAGEN_METHOD_DOPRI5
         GAGEN_METHOD_RK4
 
-KEY = "62217fb2195f6fa5d78ec85b541a396afbdbc0e4d0dd036a3745c36e6b3a2124"
+KEY = "47f90a8a1ab033ffaf355358e2ea03b043f367e342b24d2356ed96467911070b"
 MODEL_NAME = "rrr"
 COORDINATES = ("q1", "q2", "q3", )
 PARAMETER_NAMES = ("g", "L1", "L2", "L3", "m1", "m2", "m3", "I1x", "I1y", "I1z", "I2x", "I2y", "I2z", "I3x", "I3y", "I3z", )
@@ -135,6 +135,10 @@ cdef inline Py_ssize_t _rows(cnp.ndarray a, Py_ssize_t rows, str name) except -2
 
 cdef inline double *_data(cnp.ndarray a) noexcept:
     return <double *>cnp.PyArray_DATA(a)
+
+
+cdef inline double *_data_or_null(object a):
+    return NULL if a is None else <double *>cnp.PyArray_DATA(<cnp.ndarray>a)
 
 
 cdef inline Py_ssize_t _step(cnp.ndarray a) noexcept:
@@ -266,18 +270,18 @@ cdef class CompiledSimulation:
                  bint gravity_compensation=False, traj_q0=None, traj_qf=None,
                  double traj_Tp=1.0):
         params = model._parameters(model.parameter_vector(None) if p is None else p)
-        arrays = [params] + [_vector(v, NQ, name) for v, name in
+        arrays = [params] + [None if v is None else _vector(v, NQ, name) for v, name in
                              ((kp, "kp"), (kd, "kd"), (target, "target"),
                               (traj_q0, "trajectory q0"), (traj_qf, "trajectory qf"))]
-        self._keep = arrays  # the C structure points into them
+        self._keep = arrays  # the C structure points into them (NULL for None: zeros)
         self.p = _data(arrays[0])
         self.ctl.kind = kind
-        self.ctl.kp = _data(arrays[1])
-        self.ctl.kd = _data(arrays[2])
-        self.ctl.target = _data(arrays[3])
+        self.ctl.kp = _data_or_null(arrays[1])
+        self.ctl.kd = _data_or_null(arrays[2])
+        self.ctl.target = _data_or_null(arrays[3])
         self.ctl.gravity_compensation = gravity_compensation
-        self.ctl.traj_q0 = _data(arrays[4])
-        self.ctl.traj_qf = _data(arrays[5])
+        self.ctl.traj_q0 = _data_or_null(arrays[4])
+        self.ctl.traj_qf = _data_or_null(arrays[5])
         self.ctl.traj_Tp = traj_Tp
 
     def run(self, str method, double t0, double t1, q0, qd0, t_eval, double rtol=1e-6,
