@@ -167,7 +167,7 @@ def test_a_mass_matrix_failing_mid_run_stops_the_simulation(cache_dir, method):
     pd = PD(kp=[500, 300, 200], kd=[300, 150, 100], target=np.radians([-60, -60, -30]))
     te = np.linspace(0.0, 5.0, 501)
     sim = rrr.module.CompiledSimulation(rrr, rrr.parameter_vector(p), **pd.c_spec(3))
-    q, _, tau, status, _, _ = sim.run(method, 0.0, 5.0, np.zeros(3), np.zeros(3), te)
+    q, _, tau, status, _ = sim.run(method, 0.0, 5.0, np.zeros(3), np.zeros(3), te)
     assert status == 1  # <model>_ERR_NOT_POSITIVE_DEFINITE
     reached = ~np.isnan(q).any(axis=1)
     k = int(reached.sum())
@@ -190,7 +190,7 @@ def test_bad_controllers_are_refused_by_the_c_code(cache_dir):
     for spec in ({"kind": 7}, {"kind": -1}):
         sim = rrr.module.CompiledSimulation(rrr, None, **spec)
         for method in ("dopri5", "rk4"):
-            q, _, _, status, _, _ = sim.run(method, 0.0, 1.0, np.zeros(3), np.zeros(3), te)
+            q, _, _, status, _ = sim.run(method, 0.0, 1.0, np.zeros(3), np.zeros(3), te)
             assert status == -103 and np.isnan(q).all()  # GAGEN_ERR_BAD_ARG
         assert sim.torques(te, np.zeros((3, 6)))[1] == -103
     with pytest.raises(ValueError, match="unknown compiled method"):

@@ -46,7 +46,7 @@ cdef extern from "integrator.h" nogil:
         GAGEN_METHOD_DOPRI5
         GAGEN_METHOD_RK4
 
-KEY = "47f90a8a1ab033ffaf355358e2ea03b043f367e342b24d2356ed96467911070b"
+KEY = "8448119f42ddadfefec61b05516630081f7ab73e759d438629ed6b0614fcaa97"
 MODEL_NAME = "rrr"
 COORDINATES = ("q1", "q2", "q3", )
 PARAMETER_NAMES = ("g", "L1", "L2", "L3", "m1", "m2", "m3", "I1x", "I1y", "I1z", "I2x", "I2y", "I2z", "I3x", "I3y", "I3z", )
@@ -289,8 +289,8 @@ cdef class CompiledSimulation:
             double h=1e-3):
         """Integrate from (q0, qd0) and add the controller's torques at the samples.
 
-        Returns (q, qd, tau: fresh (m, n) arrays, status, torque status, stats dict); on a
-        failed integration the rows not reached are NaN and so is tau."""
+        Returns (q, qd, tau: fresh (m, n) arrays, status, stats dict); on a failed
+        integration the rows not reached are NaN and so is all of tau."""
         cdef int code
         if method == "dopri5":
             code = GAGEN_METHOD_DOPRI5
@@ -323,7 +323,7 @@ cdef class CompiledSimulation:
         cdef double *pqd = _data(qd)
         cdef double *ptau = _data(tau)
         cdef gagen_ode_stats stats
-        cdef int status, tstatus = 0
+        cdef int status
         with nogil:
             status = rrr_simulate(code, &self.ctl, self.p, t0, t1, y0, rtol, at,
                                           first_step, max_step, max_steps, h, pt, m, py,
@@ -332,14 +332,14 @@ cdef class CompiledSimulation:
                 for i in range(NQ):
                     pq[r * NQ + i] = py[r * 2 * NQ + i]
                     pqd[r * NQ + i] = py[r * 2 * NQ + NQ + i]
-            if status == 0:
-                tstatus = rrr_control_torques(&self.ctl, self.p, m, pt, py, ptau)
+            if status == 0:  # the controller passed the integrator's checks: no new status
+                rrr_control_torques(&self.ctl, self.p, m, pt, py, ptau)
             else:
                 for i in range(m * NQ):
                     ptau[i] = NAN
         info = {"nfev": stats.nfev, "nsteps": stats.nsteps, "naccepted": stats.naccepted,
                 "nrejected": stats.nrejected}
-        return q, qd, tau, status, tstatus, info
+        return q, qd, tau, status, info
 
     def torques(self, t, y):
         """The controller's torques at times t (m,) and states y (m, 2n): (tau, status)."""
