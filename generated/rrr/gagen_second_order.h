@@ -234,26 +234,15 @@ static int gagen_so_dopri5(const gagen_control *c, const double *p, double t0, d
         double h = 0.0, t_new = t;
         int step_rejected = 0;
 
-        if (h_abs > max_step)
-            h_abs = max_step;
-        else if (h_abs < min_step)
-            h_abs = min_step;
+        h_abs = gagen_dp_clip_step(h_abs, min_step, max_step);
 
         for (;;) {
             double error_norm;
             int pending;
 
-            if (h_abs < min_step)
-                return gagen_finish(stats, &st, GAGEN_ERR_STEP_TOO_SMALL, y_out, ie, n_eval, NY);
-            if (max_steps > 0 && st.nsteps >= max_steps)
-                return gagen_finish(stats, &st, GAGEN_ERR_MAX_STEPS, y_out, ie, n_eval, NY);
-
-            h = h_abs * direction;
-            t_new = t + h;
-            if (direction * (t_new - t1) > 0) t_new = t1;
-            h = t_new - t;
-            h_abs = fabs(h);
-            ++st.nsteps;
+            rc = gagen_dp_attempt(&h_abs, min_step, &st.nsteps, max_steps, t, t1, direction,
+                                  &h, &t_new);
+            if (rc != GAGEN_OK) return gagen_finish(stats, &st, rc, y_out, ie, n_eval, NY);
 
             gagen_dp_stage_input(NY, 0, NQ, 1, K, y, h, ytmp);
             pending = gagen_so_position(ytmp, p, Sa);
@@ -275,15 +264,10 @@ static int gagen_so_dopri5(const gagen_control *c, const double *p, double t0, d
             gagen_so_derivative(&law, p, t + h, Sb, y_new, K + GAGEN_DP_NSTAGES * NY);
 
             error_norm = gagen_dp_error_norm(NY, K, y, y_new, h, rtol, atol, root_n);
-            if (error_norm < 1) {
+            if (error_norm < 1)
                 ie = gagen_dp_dense_output(NY, K, y, y_new, t, h, t_new, direction, t_eval,
                                            n_eval, ie, y_out, Q);
-                h_abs *= gagen_dp_accept_factor(error_norm, step_rejected);
-                break;
-            }
-            h_abs *= gagen_dp_reject_factor(error_norm);
-            step_rejected = 1;
-            ++st.nrejected;
+            if (gagen_dp_control(error_norm, &step_rejected, &h_abs, &st.nrejected)) break;
         }
         ++st.naccepted;
 

@@ -76,25 +76,14 @@ int gagen_dopri5(gagen_ode_fn f, void *ctx, int n, double t0, double t1, const d
         double h = 0.0, t_new = t;
         int step_rejected = 0;
 
-        if (h_abs > max_step)
-            h_abs = max_step;
-        else if (h_abs < min_step)
-            h_abs = min_step;
+        h_abs = gagen_dp_clip_step(h_abs, min_step, max_step);
 
         for (;;) {
             double error_norm;
 
-            if (h_abs < min_step)
-                return gagen_finish(stats, &st, GAGEN_ERR_STEP_TOO_SMALL, y_out, ie, n_eval, n);
-            if (max_steps > 0 && st.nsteps >= max_steps)
-                return gagen_finish(stats, &st, GAGEN_ERR_MAX_STEPS, y_out, ie, n_eval, n);
-
-            h = h_abs * direction;
-            t_new = t + h;
-            if (direction * (t_new - t1) > 0) t_new = t1;
-            h = t_new - t;
-            h_abs = fabs(h);
-            ++st.nsteps;
+            rc = gagen_dp_attempt(&h_abs, min_step, &st.nsteps, max_steps, t, t1, direction,
+                                  &h, &t_new);
+            if (rc != GAGEN_OK) return gagen_finish(stats, &st, rc, y_out, ie, n_eval, n);
 
             for (s = 1; s < GAGEN_DP_NSTAGES; ++s) {
                 gagen_dp_stage_input(n, 0, n, s, K, y, h, ytmp);
@@ -109,18 +98,13 @@ int gagen_dopri5(gagen_ode_fn f, void *ctx, int n, double t0, double t1, const d
             if (rc != 0) return gagen_finish(stats, &st, rc, y_out, ie, n_eval, n);
 
             error_norm = gagen_dp_error_norm(n, K, y, y_new, h, rtol, atol, root_n);
-            if (error_norm < 1) {
-                /* Accepted: write this step's output first.  It does not depend on the
-                 * pow() below, so the processor overlaps the two; the next step has to
-                 * wait for pow()'s new step size anyway. */
+            /* Accepted: write this step's output first.  It does not depend on the pow() of
+             * the step-size control, so the processor overlaps the two; the next step has to
+             * wait for pow()'s new step size anyway. */
+            if (error_norm < 1)
                 ie = gagen_dp_dense_output(n, K, y, y_new, t, h, t_new, direction, t_eval,
                                            n_eval, ie, y_out, Q);
-                h_abs *= gagen_dp_accept_factor(error_norm, step_rejected);
-                break;
-            }
-            h_abs *= gagen_dp_reject_factor(error_norm);
-            step_rejected = 1;
-            ++st.nrejected;
+            if (gagen_dp_control(error_norm, &step_rejected, &h_abs, &st.nrejected)) break;
         }
         ++st.naccepted;
 

@@ -254,6 +254,46 @@ static inline double gagen_dp_reject_factor(double error_norm)
                        GAGEN_DP_SAFETY * pow(error_norm, GAGEN_DP_ERROR_EXPONENT));
 }
 
+/* The size of the first attempt of a step from t: h_abs within [min_step, max_step]. */
+static inline double gagen_dp_clip_step(double h_abs, double min_step, double max_step)
+{
+    if (h_abs > max_step) return max_step;
+    if (h_abs < min_step) return min_step;
+    return h_abs;
+}
+
+/* A step attempt from t: GAGEN_OK and its h and t_new (the step cut to end at t1), with
+ * h_abs = |h| and one more attempt counted; or the error that ends the integration. */
+static inline int gagen_dp_attempt(double *h_abs, double min_step, long *nsteps,
+                                   long max_steps, double t, double t1, double direction,
+                                   double *h, double *t_new)
+{
+    if (*h_abs < min_step) return GAGEN_ERR_STEP_TOO_SMALL;
+    if (max_steps > 0 && *nsteps >= max_steps) return GAGEN_ERR_MAX_STEPS;
+    *h = *h_abs * direction;
+    *t_new = t + *h;
+    if (direction * (*t_new - t1) > 0) *t_new = t1;
+    *h = *t_new - t;
+    *h_abs = fabs(*h);
+    ++*nsteps;
+    return GAGEN_OK;
+}
+
+/* Step-size control after an attempt: 1 if it is accepted (error_norm < 1; h_abs becomes the
+ * next step's), else 0 and h_abs shrinks for another attempt, counted in nrejected. */
+static inline int gagen_dp_control(double error_norm, int *step_rejected, double *h_abs,
+                                   long *nrejected)
+{
+    if (error_norm < 1) {
+        *h_abs *= gagen_dp_accept_factor(error_norm, *step_rejected);
+        return 1;
+    }
+    *h_abs *= gagen_dp_reject_factor(error_norm);
+    *step_rejected = 1;
+    ++*nrejected;
+    return 0;
+}
+
 /* The smallest step allowed at t, 10 ulp(t) in the direction of integration. */
 static inline double gagen_dp_min_step(double t, double direction)
 {

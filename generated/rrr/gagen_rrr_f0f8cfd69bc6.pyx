@@ -46,7 +46,7 @@ cdef extern from "integrator.h" nogil:
         GAGEN_METHOD_DOPRI5
         GAGEN_METHOD_RK4
 
-KEY = "8448119f42ddadfefec61b05516630081f7ab73e759d438629ed6b0614fcaa97"
+KEY = "f0f8cfd69bc6ee23bb58cbc36de127b57a4be451b272b231af957b3433e05ca6"
 MODEL_NAME = "rrr"
 COORDINATES = ("q1", "q2", "q3", )
 PARAMETER_NAMES = ("g", "L1", "L2", "L3", "m1", "m2", "m3", "I1x", "I1y", "I1z", "I2x", "I2y", "I2z", "I3x", "I3y", "I3z", )
