@@ -270,3 +270,16 @@ def test_sources_only_generation_writes_every_file(tmp_path):
     names = {p.name for p in tmp_path.iterdir()}
     assert {*MODEL_C_FILES, *COPIED_FILES, "rrr.h", f"{report.module_name}.pyx"} == names
     assert report.ops_after_cse < report.ops_before_cse
+
+
+def test_small_models_inline_their_stages_and_large_ones_call_them():
+    """simulation.c puts the position and velocity stages inline into the integrators only
+    when they are small (INLINE_STAGE_OPS): a dozen copies of a large one compile slowly."""
+    from gagen.codegen import INLINE_STAGE_OPS
+    from gagen.gibbs_appell import derive
+
+    for name, inline in (("rrr", True), ("chain:4", False)):
+        text = generate(derive(gagen.resolve_model(name)), "m", "k").files["simulation.c"]
+        ops = int(re.search(r"The two stages have (\d+) operations", text).group(1))
+        assert (ops <= INLINE_STAGE_OPS) == inline, (name, ops)
+        assert ("always_inline" in text) == inline, name

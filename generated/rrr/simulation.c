@@ -4,13 +4,21 @@
 #include "gagen_math.h"
 #include "rrr.h"
 
+/* The two stages have 219 operations: few enough to go inline into every stage of
+ * the integrators, which spares a call (and the spilling of the integrator's registers)
+ * per stage. Larger models call them instead, as a dozen copies would compile slowly. */
+#if defined(__GNUC__) || defined(__clang__)
+#define GAGEN_STAGE static inline __attribute__((always_inline))
+#else
+#define GAGEN_STAGE static inline
+#endif
+
 /* The part of qdd(q, qd, u) that depends on q alone, into S (38 doubles): the
  * 23 values the velocity stage reads, the gravity torques G, M(q)'s
  * factors 1/D and U = L D (in M's lower triangle). Returns 0, or
  * RRR_ERR_NOT_POSITIVE_DEFINITE. */
-GAGEN_KERNEL
-static int gagen_so_position(const double *restrict q, const double *restrict p,
-                             double *restrict S)
+GAGEN_STAGE
+int gagen_so_position(const double *restrict q, const double *restrict p, double *restrict S)
 {
     double *const G = S + 23, *const Dinv = S + 26;
     double *const M = S + 29;
@@ -109,10 +117,10 @@ static int gagen_so_position(const double *restrict q, const double *restrict p,
 }
 
 /* The rest: qdd at velocities qd under the joint torques u, given S = position stage of q. */
-GAGEN_KERNEL
-static void gagen_so_velocity(const double *restrict S, const double *restrict q,
-                              const double *restrict qd, const double *restrict u,
-                              const double *restrict p, double *restrict qdd)
+GAGEN_STAGE
+void gagen_so_velocity(const double *restrict S, const double *restrict q,
+                       const double *restrict qd, const double *restrict u,
+                       const double *restrict p, double *restrict qdd)
 {
     const double *const Dinv = S + 26, *const M = S + 29;
     double F[3];
@@ -223,6 +231,7 @@ static void gagen_so_inverse(const double *q, const double *qd, const double *qd
 #define GAGEN_SO_GRAVITY 23
 #include "gagen_second_order.h"
 
+GAGEN_KERNEL
 int rrr_forward_dynamics(const double *q, const double *qd, const double *tau,
                                  const double *p, double *qdd)
 {
@@ -233,6 +242,7 @@ int rrr_forward_dynamics(const double *q, const double *qd, const double *tau,
     return 0;
 }
 
+GAGEN_KERNEL
 int rrr_forward_dynamics_gc(const double *q, const double *qd, const double *u,
                                     const double *p, double *qdd)
 {

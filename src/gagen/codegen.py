@@ -29,6 +29,10 @@ COPIED_FILES = ("integrator.c", "integrator.h", "gagen_ode.h", "gagen_second_ord
                 "gagen_math.h")
 TEMPLATE_FILES = ("macros.j2", "header.h.j2", "mass_matrix.c.j2", "rhs.c.j2",
                   "simulation.c.j2", "inverse_dynamics.c.j2", "wrapper.pyx.j2") + COPIED_FILES
+# Stages of at most this many operations go inline into each integrator stage (sparing a call
+# and its register spills per stage: about 5 % of the paper's robot's simulation); larger
+# ones are called, since a dozen inline copies would multiply their compile time.
+INLINE_STAGE_OPS = 400
 # the C files of a model, all compiled into its module
 MODEL_C_FILES = ("mass_matrix.c", "rhs.c", "simulation.c", "inverse_dynamics.c",
                  "integrator.c")
@@ -214,7 +218,7 @@ def _assignments_block(printer: GagenCPrinter, assignments, exprs: list[sp.Expr]
 
 @dataclass
 class Stages:
-    """forward dynamics under u + g(q) as a position and a velocity stage (simulation.c)."""
+    """Forward dynamics under u + g(q) as a position and a velocity stage (simulation.c)."""
 
     position: CodeBlock
     velocity: CodeBlock
@@ -223,6 +227,8 @@ class Stages:
     gravity_at: int
     dinv_at: int
     mass_at: int
+    ops: int  # operations of both stages
+    inline: bool  # small enough to go inline into every integrator stage
 
 
 def _stages(eqs: Equations, cse: CSEResult, printer: GagenCPrinter,
@@ -246,8 +252,10 @@ def _stages(eqs: Equations, cse: CSEResult, printer: GagenCPrinter,
                                   targets["forcing"])
     n, ni = eqs.n, len(split.interface)
     interface = [(k, printer._names[s]) for k, s in enumerate(split.interface)]
+    ops = sp.count_ops([a.expr for a in split.position + split.velocity]
+                       + fixed_outputs + split.velocity_outputs)
     return Stages(position, velocity, interface, size=ni + 2 * n + n * n, gravity_at=ni,
-                  dinv_at=ni + n, mass_at=ni + 2 * n)
+                  dinv_at=ni + n, mass_at=ni + 2 * n, ops=ops, inline=ops <= INLINE_STAGE_OPS)
 
 
 def factor_pattern(n: int, zero: set[tuple[int, int]]) -> set[tuple[int, int]]:
