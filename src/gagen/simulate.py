@@ -75,6 +75,7 @@ class SimulationResult:
 
 
 _UNIT_GRID = np.arange(DEFAULT_POINTS, dtype=float)
+_FLOAT64 = np.dtype(np.float64)
 
 
 @functools.lru_cache(maxsize=16)
@@ -90,7 +91,7 @@ def _vector(x, n: int, name: str) -> np.ndarray:
     """x as n finite floats; an array that already is one is returned as it is (read only)."""
     if x is None:
         return np.zeros(n)
-    if type(x) is np.ndarray and x.dtype == np.float64 and x.shape == (n,):
+    if type(x) is np.ndarray and x.dtype is _FLOAT64 and x.shape == (n,):
         if not all(map(math.isfinite, x.tolist())):
             raise ValueError(f"{name} must be finite, got {x}")
         return x
