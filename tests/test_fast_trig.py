@@ -33,6 +33,7 @@ void drv_sincos(const double *x, double *s, double *c, long n);
 void drv_sin(const double *x, double *out, long n);
 void drv_cos(const double *x, double *out, long n);
 void drv_sin_cos_same_x(const double *x, double *s, double *c, long n);
+void drv_sincos2(const double *x, double *s, double *c, long n);
 
 void drv_sincos(const double *x, double *s, double *c, long n)
 {
@@ -50,6 +51,14 @@ void drv_cos(const double *x, double *out, long n)
 {
     long i;
     for (i = 0; i < n; i++) out[i] = gagen_cos(x[i]);
+}
+
+/* two arguments at a time (x[i], x[i + 1]), as generated kernels call it */
+void drv_sincos2(const double *x, double *s, double *c, long n)
+{
+    long i;
+    for (i = 0; i + 1 < n; i += 2) gagen_sincos2(x[i], x[i + 1], &s[i], &c[i], &s[i + 1], &c[i + 1]);
+    if (i < n) gagen_sincos(x[i], &s[i], &c[i]);
 }
 
 /* both on the same argument, as generated kernels call them */
@@ -107,6 +116,9 @@ class Trig:
 
     def sin_cos_same_x(self, x):
         return self._call("drv_sin_cos_same_x", x, 2)
+
+    def sincos2(self, x):
+        return self._call("drv_sincos2", x, 2)
 
 
 @pytest.fixture(scope="module")
@@ -283,6 +295,35 @@ def test_sin_and_cos_equal_sincos_bit_for_bit(trig):
     assert same_bits(trig.cos(x), c)
     s2, c2 = trig.sin_cos_same_x(x)
     assert same_bits(s2, s) and same_bits(c2, c)
+
+
+def _cpu_has_fma() -> bool:
+    try:
+        return " fma " in Path("/proc/cpuinfo").read_text().replace("\n", " ")
+    except OSError:
+        return False
+
+
+@pytest.mark.parametrize("flags", [(), ("-std=gnu99", "-O3"), ("-std=gnu99", "-O3", "-mfma")])
+def test_two_at_a_time_equals_one_at_a_time_bit_for_bit(build_dir, trig, flags):
+    """gagen_sincos2 (one SSE2 vector) gives gagen_sincos's bits on both lanes, also where
+    one lane takes the slow path (huge, inf, nan, close to a multiple of pi/2), and also
+    with contraction into FMA (GNU C, -mfma: the kernels' FMA clones)."""
+    if "-mfma" in flags and not _cpu_has_fma():
+        pytest.skip("this CPU has no FMA")
+    lib = trig if not flags else Trig(_compile(build_dir, "drv2" + "".join(flags), flags))
+    rng = np.random.default_rng(13)
+    special = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, 1e300, -3e7, 2.0**20, 5e-324])
+    x = np.concatenate([accuracy_points(), rng.uniform(-50.0, 50.0, 20_000), special,
+                        rng.permutation(np.concatenate([special, rng.uniform(-4, 4, 9)]))])
+    s, c = lib.sincos(x)
+    for shifted in (x, np.roll(x, 1)):  # every value in both lanes
+        s2, c2 = lib.sincos2(shifted)
+        s1, c1 = lib.sincos(shifted)
+        assert same_bits(s2, s1) and same_bits(c2, c1)
+    if not flags:
+        s2, c2 = lib.sincos2(x)
+        assert same_bits(s2, s) and same_bits(c2, c)
 
 
 def test_same_results_at_other_optimisation_levels(build_dir, trig):
