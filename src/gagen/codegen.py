@@ -204,13 +204,11 @@ def _assignments_block(printer: GagenCPrinter, assignments, exprs: list[sp.Expr]
                        targets: list[str], printed: dict[sp.Symbol, str] | None = None
                        ) -> CodeBlock:
     """The code of given assignments (their text cached in `printed` if given) and outputs."""
-    local = []
+    cache = {} if printed is None else printed
     for a in assignments:
-        if printed is None:
-            text = printer.doprint(a.expr)
-        else:
-            text = printed.get(a.symbol) or printed.setdefault(a.symbol, printer.doprint(a.expr))
-        local.append((printer._names[a.symbol], text))
+        if a.symbol not in cache:
+            cache[a.symbol] = printer.doprint(a.expr)
+    local = [(printer._names[a.symbol], cache[a.symbol]) for a in assignments]
     outputs = [(t, printer.doprint(e)) for t, e in zip(targets, exprs)]
     prelude = printer.trig_prelude([a.expr for a in assignments] + list(exprs))
     return CodeBlock(prelude=prelude, locals=local, outputs=outputs)

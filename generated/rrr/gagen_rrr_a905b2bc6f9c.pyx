@@ -46,7 +46,7 @@ cdef extern from "integrator.h" nogil:
         GAGEN_METHOD_DOPRI5
         GAGEN_METHOD_RK4
 
-KEY = "b92b0cbb0678d00a76b6f298363eab28f402509e8a8ca417c6301cae07303e2d"
+KEY = "a905b2bc6f9cb71a828cdd4610f7374900da9868cc419dbe3ddbb9c62ab5142f"
 MODEL_NAME = "rrr"
 COORDINATES = ("q1", "q2", "q3", )
 PARAMETER_NAMES = ("g", "L1", "L2", "L3", "m1", "m2", "m3", "I1x", "I1y", "I1z", "I2x", "I2y", "I2z", "I3x", "I3y", "I3z", )
