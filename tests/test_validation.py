@@ -91,8 +91,6 @@ CASES = [
     ("world as a body", {"bodies__0__name": "world"}, "body 'world'", r"'world' is reserved"),
     ("duplicate coordinate", {"bodies__2__joint__name": "q1"}, "body 'link3', joint 'q1'",
      r"duplicate coordinate name \(also used by body 'link1'\)"),
-    ("coordinate named as a parameter", {"bodies__0__joint__name": "L"},
-     "body 'link1', joint 'L'", r"clashes with a parameter"),
     # undeclared symbols, wherever they are
     ("undeclared in com", {"bodies__1__com": [0, "L/2 + zz", 0]}, "body 'link2', com[1]",
      r"undeclared symbol zz \(declare it under 'parameters'\)"),
@@ -132,7 +130,6 @@ CASES = [
     ("null default", {"parameters__L": None}, "parameter 'L'", r"default value None is not"),
     ("list default", {"parameters__L": [1, 2]}, "parameter 'L'", r"is not a number"),
     ("non-finite default", {"parameters__L": float("inf")}, "parameter 'L'", r"not finite"),
-    ("reserved parameter name", {"parameters___g1": 1.0}, "parameter '_g1'", r"reserved"),
     ("parameters not a mapping", {"parameters": [1, 2]}, "parameters", r"expected a mapping"),
     # unknown keys
     ("unknown top-level key", {"colour": "red"}, "", r"unknown key\(s\) colour"),
@@ -177,18 +174,6 @@ def test_missing_bodies_key(tmp_path):
     del doc["bodies"]
     for fmt in FORMATS:
         assert_model_error(write(tmp_path, doc, fmt), "", r"missing 'bodies'")
-
-
-def test_coordinate_symbols_clashing_with_parameters(tmp_path):
-    """A parameter named like a coordinate's rate or torque is caught when loading."""
-    for clash, joint in (("q2_d", "q2"), ("tau_q1", "q1"), ("q3_dd", "q3")):
-        doc = variant(**{f"parameters__{clash}": 1.0})
-        body = {"q1": "link1", "q2": "link2", "q3": "link3"}[joint]
-        for fmt in FORMATS:
-            path = write(tmp_path, doc, fmt)
-            err = assert_model_error(path, f"body '{body}', joint '{joint}'",
-                                     r"clashes with a parameter", load=False)
-            assert clash in str(err)
 
 
 MALFORMED_YAML = {

@@ -31,6 +31,8 @@ from .model import Model
 
 DEFAULT_FLAGS = ("-O3",)
 FAST_MATH_FLAGS = ("-ffast-math",)
+# One version of the kernels for any CPU of the architecture: no FMA clone (gagen_math.h)
+PORTABLE_FLAGS = ("-DGAGEN_KERNEL=",)
 _loaded_modules: dict[str, object] = {}
 
 
@@ -82,8 +84,11 @@ def module_name_for(model: Model, key: str) -> str:
     return f"gagen_{c_identifier(model.name)}_{key[:12]}"
 
 
-def compile_flags(fast_math: bool = False) -> list[str]:
-    return list(DEFAULT_FLAGS) + (list(FAST_MATH_FLAGS) if fast_math else [])
+def compile_flags(fast_math: bool = False, portable: bool = False) -> list[str]:
+    """The compiler flags: -O3, plus -ffast-math on request, plus no per-CPU kernel clones
+    with `portable` (for a module copied to other machines, and to test that version)."""
+    return (list(DEFAULT_FLAGS) + (list(FAST_MATH_FLAGS) if fast_math else [])
+            + (list(PORTABLE_FLAGS) if portable else []))
 
 
 def build_key(src_key: str, flags: list[str]) -> str:
@@ -170,7 +175,9 @@ from distutils.sysconfig import customize_compiler
 from Cython.Build import cythonize
 from setuptools import Extension
 name, flags = sys.argv[1], sys.argv[2].split()
-includes = [".", numpy.get_include(), sysconfig.get_paths()["include"]]
+# not ".": the sources include each other with quotes (found next to them), and a model
+# header on the include path could shadow a system header (a model named `math`)
+includes = [numpy.get_include(), sysconfig.get_paths()["include"]]
 macros = [("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")]
 cythonize([Extension(name, [name + ".pyx"])], quiet=True, language_level=3)
 cc = new_compiler()
@@ -208,13 +215,14 @@ def compile_sources(folder: Path, module_name: str, flags: list[str], verbose: b
 
 
 def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
-          fast_math: bool = False, verbose: bool = False) -> tuple[Path, BuildReport]:
+          fast_math: bool = False, verbose: bool = False, portable: bool = False
+          ) -> tuple[Path, BuildReport]:
     """Derive, generate and compile; return the extension's path and what was done.
 
     With `out`, the sources and the module are written there. Otherwise the cache is used:
     an up-to-date entry is reused as it is.
     """
-    flags = compile_flags(fast_math)
+    flags = compile_flags(fast_math, portable)
     src_key = source_key(model)
     name = module_name_for(model, src_key)
     suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
@@ -284,9 +292,9 @@ def import_extension(path: Path, module_name: str):
     return module
 
 
-def shipped_module(model: Model, fast_math: bool):
+def shipped_module(model: Model, fast_math: bool, portable: bool = False):
     """The module compiled at install time from `generated/`, if it matches this model."""
-    if fast_math:
+    if fast_math or portable:
         return None
     name = module_name_for(model, source_key(model))
     try:
@@ -303,13 +311,13 @@ def dynamics_class(module):
 
 
 def load_compiled(model: Model, cache_dir: Path | None = None, fast_math: bool = False,
-                  verbose: bool | None = None):
+                  verbose: bool | None = None, portable: bool = False):
     """The compiled backend of `gagen.load`: shipped module, cached module, or a new build."""
     key = source_key(model)
-    module = shipped_module(model, fast_math)
+    module = shipped_module(model, fast_math, portable)
     if module is None:
         path, report = build(model, cache_dir=cache_dir, fast_math=fast_math,
-                             verbose=True if verbose is None else verbose)
+                             verbose=True if verbose is None else verbose, portable=portable)
         module = import_extension(path, report.module_name)
     if module.KEY != key:
         raise BuildError(f"module {module.__name__} was not built from this version of "

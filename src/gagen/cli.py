@@ -64,6 +64,8 @@ def parser() -> argparse.ArgumentParser:
         description="Compiled Gibbs-Appell equations of motion for trees of rigid bodies.",
     )
     top.add_argument("--version", action="version", version=f"gagen {__version__}")
+    top.add_argument("--traceback", action="store_true",
+                     help="on an error, show Python's traceback instead of one line")
     sub = top.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("build", help="derive, generate C and compile a model",
@@ -96,23 +98,40 @@ def _command_modules():
     return [register_paper, register_bench]
 
 
+# What a user can cause, and the exit code each gets: bad input (2) or a run that failed (1).
+# Anything else is a bug in gagen and keeps its traceback.
+def _exit_code(exc: BaseException) -> int | None:
+    from .build import BuildError
+    from .dynamics import SingularMassMatrixError
+
+    if isinstance(exc, (BuildError, SingularMassMatrixError, OSError, RuntimeError)):
+        return 1
+    if isinstance(exc, (ModelError, ValueError, TypeError, KeyError)):
+        return 2
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; a user's error prints one line `gagen: error: ...` (exit 1 or 2)."""
     args = parser().parse_args(argv)
     try:
         return args.run(args)
-    except ModelError as exc:
-        print(f"gagen: error: {exc}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
         print("gagen: interrupted", file=sys.stderr)
         return 130
-    except Exception as exc:  # shown with its kind, without a traceback, for known failures
-        from .build import BuildError
+    except Exception as exc:
+        code = _exit_code(exc)
+        if code is None or args.traceback:
+            raise
+        print(f"gagen: error: {_one_line(exc)}", file=sys.stderr)
+        return code
 
-        if isinstance(exc, BuildError):
-            print(f"gagen: error: {exc}", file=sys.stderr)
-            return 1
-        raise
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    if isinstance(exc, KeyError):  # str(KeyError) is the repr of its argument
+        text = str(exc.args[0]) if exc.args else text
+    return text if len(text) <= 2000 else text[:2000] + " ..."
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import sympy as sp
 
 from .gibbs_appell import Equations
+from .symbols import internal_symbols
 
 
 @dataclass
@@ -34,7 +35,7 @@ class CSEResult:
         self.ops_before = _ops(e for _, e in defs) + _ops(flat)
         start = time.perf_counter()
         temps, reduced = sp.cse([e for _, e in defs] + flat,
-                                symbols=sp.numbered_symbols("_x"), order="canonical")
+                                symbols=internal_symbols("_x"), order="canonical")
         self.seconds = time.perf_counter() - start
         reduced_defs, reduced_out = reduced[: len(defs)], reduced[len(defs):]
         assignments = [Assignment(s, e) for s, e in temps]

@@ -18,7 +18,8 @@ from dataclasses import dataclass, field
 
 import sympy as sp
 
-from .model import Body, Model, ModelError
+from .model import Body, Model
+from .symbols import Acceleration, Coordinate, Internal, Rate, Torque
 
 Vec = sp.Matrix
 
@@ -28,8 +29,8 @@ class Recorder:
 
     def __init__(self, prefix: str = "_g"):
         self.prefix = prefix
-        self.definitions: list[tuple[sp.Symbol, sp.Expr]] = []
-        self._by_expr: dict[sp.Expr, sp.Symbol] = {}
+        self.definitions: list[tuple[Internal, sp.Expr]] = []
+        self._by_expr: dict[sp.Expr, Internal] = {}
 
     def name(self, expr) -> sp.Expr:
         expr = sp.sympify(expr)
@@ -37,7 +38,7 @@ class Recorder:
             return expr
         symbol = self._by_expr.get(expr)
         if symbol is None:
-            symbol = sp.Symbol(f"{self.prefix}{len(self.definitions)}")
+            symbol = Internal(f"{self.prefix}{len(self.definitions)}")
             self.definitions.append((symbol, expr))
             self._by_expr[expr] = symbol
         return symbol
@@ -55,28 +56,23 @@ def _is_trivial(expr: sp.Expr) -> bool:
 
 @dataclass
 class CoordinateSymbols:
-    q: list[sp.Symbol]
-    qd: list[sp.Symbol]
-    qdd: list[sp.Symbol]
-    tau: list[sp.Symbol]
+    """The symbols of q, qd, qdd and tau; each kind is a class of its own (gagen.symbols),
+    so none can equal a parameter or another kind whatever the joints are called."""
+
+    q: list[Coordinate]
+    qd: list[Rate]
+    qdd: list[Acceleration]
+    tau: list[Torque]
 
     @classmethod
     def for_model(cls, model: Model) -> CoordinateSymbols:
         names = model.coordinates
-        symbols = cls(
-            q=[sp.Symbol(n) for n in names],
-            qd=[sp.Symbol(f"{n}_d") for n in names],
-            qdd=[sp.Symbol(f"{n}_dd") for n in names],
-            tau=[sp.Symbol(f"tau_{n}") for n in names],
+        return cls(
+            q=[Coordinate(n) for n in names],
+            qd=[Rate(f"{n}_d") for n in names],
+            qdd=[Acceleration(f"{n}_dd") for n in names],
+            tau=[Torque(f"tau_{n}") for n in names],
         )
-        taken = set(model.parameters)
-        for s in symbols.q + symbols.qd + symbols.qdd + symbols.tau:
-            if s.name in taken:
-                raise ModelError(model.source, f"coordinate '{s.name}'",
-                                 "its name, or that of its rate or torque, is already taken "
-                                 "by a parameter or another coordinate")
-            taken.add(s.name)
-        return symbols
 
 
 @dataclass

@@ -46,11 +46,18 @@ class LambdifyDynamics(DynamicsInfo):
         self._lower = np.tril_indices(n)
 
     def _lambdify(self, args, exprs):
-        def given_intermediates(expressions):
-            return _needed_intermediates(self.equations, expressions), expressions
+        """A NumPy function of the flattened args; lambdify sees none of the users' names.
 
+        Arguments become `a<k>` and intermediates `t<k>`: a parameter called `sin` or a
+        joint called like an intermediate cannot shadow anything in the generated code."""
         flat_args = [s for group in args for s in group]
-        return sp.lambdify(flat_args, exprs, modules="numpy", cse=given_intermediates)
+        needed = _needed_intermediates(self.equations, exprs)
+        rename = {s: sp.Symbol(f"a{k}") for k, s in enumerate(flat_args)}
+        rename.update({s: sp.Symbol(f"t{k}") for k, (s, _) in enumerate(needed)})
+        definitions = [(rename[s], e.xreplace(rename)) for s, e in needed]
+        renamed = [sp.sympify(e).xreplace(rename) for e in exprs]
+        return sp.lambdify([rename[s] for s in flat_args], renamed, modules="numpy",
+                           cse=lambda expressions: (definitions, expressions))
 
     def _call(self, fn, states, p, stacked):
         pv = self.parameter_vector(p)

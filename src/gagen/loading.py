@@ -37,7 +37,8 @@ def load(model: str | Path | Model = "rrr", backend: str = "compiled", **options
     `model` is a built-in name (`rrr`, `chain:N`), a model file (.yaml, .yml, .json), a
     .urdf file, or a `gagen.model.Model`. `backend` is "compiled" (generated C through
     Cython, built on first use and cached) or "lambdify" (SymPy's lambdify, no compiler).
-    Options of the compiled backend: `cache_dir`, `fast_math`, `verbose`.
+    Options of the compiled backend: `cache_dir`, `fast_math`, `verbose`, `portable` (one
+    version of the kernels for any CPU, no FMA clone).
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend '{backend}' (expected one of {', '.join(BACKENDS)})")

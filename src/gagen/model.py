@@ -16,8 +16,6 @@ import sympy as sp
 
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
 WORLD = "world"
-# Reserved prefix of the derivation's intermediate symbols.
-RESERVED_PREFIX = "_g"
 
 
 class ModelError(ValueError):
@@ -221,8 +219,8 @@ def _validate(model: Model) -> None:
     src = model.source
     params = model.parameters
     for name, value in params.items():
-        if not name or name.startswith(RESERVED_PREFIX):
-            raise ModelError(src, f"parameter '{name}'", f"names starting with '{RESERVED_PREFIX}' are reserved")
+        if not name:
+            raise ModelError(src, "parameters", "a parameter needs a non-empty name")
         try:
             val = float(value)
         except (TypeError, ValueError):
@@ -256,13 +254,6 @@ def _validate(model: Model) -> None:
             if j.name in coords:
                 raise ModelError(src, f"{where}, joint '{j.name}'",
                                  f"duplicate coordinate name (also used by body '{coords[j.name]}')")
-            derived = {j.name, f"{j.name}_d", f"{j.name}_dd", f"tau_{j.name}"}
-            clash = sorted(derived & declared)
-            if clash:
-                raise ModelError(src, f"{where}, joint '{j.name}'",
-                                 f"clashes with a parameter: '{clash[0]}' names both a parameter "
-                                 f"and this coordinate or its rate, acceleration or torque "
-                                 f"({', '.join(sorted(derived))}); rename one of them")
             coords[j.name] = b.name
             axis = np.array([_numeric(a, values, src, f"{where}, axis") for a in j.axis])
             if not np.linalg.norm(axis) > 1e-12:

@@ -35,12 +35,47 @@ def _say(text: str) -> None:
     print(f"gagen: {text}", flush=True)
 
 
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got '{text}'")
+    return value
+
+
+def _positive(text: str) -> float:
+    value = _finite(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got '{text}'")
+    return value
+
+
+def _nonnegative(text: str) -> float:
+    value = _finite(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got '{text}'")
+    return value
+
+
+def _sample_count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
+    if not 2 <= value <= 10_000_000:
+        raise argparse.ArgumentTypeError(f"expected 2 to 10,000,000 samples, got {value}")
+    return value
+
+
 def _floats(text: str, name: str) -> np.ndarray:
     try:
-        return np.array([float(v) for v in text.replace(" ", "").split(",") if v], dtype=float)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{name}: expected comma-separated numbers, got "
-                                         f"'{text}'") from None
+        return np.array([_finite(v) for v in text.replace(" ", "").split(",") if v],
+                        dtype=float)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"{name}: expected comma-separated finite numbers, "
+                                         f"got '{text}'") from None
 
 
 def _degrees_to_model(values_deg: np.ndarray, model) -> np.ndarray:
@@ -80,8 +115,18 @@ def _load(args):
     return model, dyn
 
 
+def default_out_dir(model) -> Path:
+    """out/<identifier of the model's name>: a name can never choose where files go
+    (`../../x` becomes out/x, an absolute path a folder inside out/)."""
+    from .codegen import c_identifier
+
+    return Path("out") / c_identifier(model.name)
+
+
 def _out_dir(args, model) -> Path:
-    out = Path(args.out) if args.out else Path("out") / model.name
+    out = Path(args.out) if args.out else default_out_dir(model)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"--out {out}: exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
     return out
 
@@ -99,10 +144,6 @@ def _simulate(args: argparse.Namespace) -> int:
     from .dynamics import SingularMassMatrixError
     from .simulate import simulate
 
-    if args.duration <= 0:
-        return _fail(ValueError(f"--duration must be positive, got {args.duration}"))
-    if args.points < 2:
-        return _fail(ValueError(f"--points must be at least 2, got {args.points}"))
     method = args.method or ("dopri5" if args.backend == "compiled" else "RK45")
     if method in COMPILED_METHODS and args.backend != "compiled":
         return _fail(ValueError(f"--method {method} needs --backend compiled; use a scipy "
@@ -168,10 +209,6 @@ def _inverse(args: argparse.Namespace) -> int:
     from .simulate import inverse_dynamics_along
     from .trajectory import Eq11Trajectory
 
-    if args.duration <= 0:
-        return _fail(ValueError(f"--duration must be positive, got {args.duration}"))
-    if args.points < 2:
-        return _fail(ValueError(f"--points must be at least 2, got {args.points}"))
     model, dyn = _load(args)
     try:
         qf = default_target(model) if args.qf is None else _degrees_to_model(args.qf, model)
@@ -248,9 +285,9 @@ def _summarize_paper(out: Path) -> None:
 
 def _common(p: argparse.ArgumentParser, what: str) -> None:
     add_model_argument(p)
-    p.add_argument("--duration", type=float, default=5.0, metavar="S",
+    p.add_argument("--duration", type=_positive, default=5.0, metavar="S",
                    help=f"{what} in seconds (default: %(default)s, as in the paper)")
-    p.add_argument("--points", type=int, default=501, metavar="N",
+    p.add_argument("--points", type=_sample_count, default=501, metavar="N",
                    help="output samples, evenly spaced (default: %(default)s)")
     p.add_argument("--out", metavar="DIR",
                    help="output folder (default: out/<model name>, e.g. out/rrr)")
@@ -280,11 +317,11 @@ def register(subparsers) -> None:
                    "the same steps as scipy's RK45, the paper's ode45); or any "
                    "scipy.integrate.solve_ivp method (default: dopri5 with the compiled "
                    "backend, RK45 with lambdify)")
-    p.add_argument("--rtol", type=float, default=1e-6,
+    p.add_argument("--rtol", type=_positive, default=1e-6,
                    help="relative tolerance (default: %(default)s)")
-    p.add_argument("--atol", type=float, default=1e-8,
+    p.add_argument("--atol", type=_nonnegative, default=1e-8,
                    help="absolute tolerance (default: %(default)s)")
-    p.add_argument("--step", type=float, default=1e-3, metavar="H",
+    p.add_argument("--step", type=_positive, default=1e-3, metavar="H",
                    help="fixed step of rk4 in seconds (default: %(default)s)")
     p.add_argument("--target", type=lambda s: _floats(s, "--target"), metavar="V1,V2,...",
                    help="PD target, degrees (metres for prismatic joints), one value or one "

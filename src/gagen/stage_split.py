@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import sympy as sp
 
 from .cse import Assignment
+from .symbols import internal_symbols
 
 
 @dataclass
@@ -52,7 +53,7 @@ class _Hoister:
         self.is_position = is_position
         self.assignments: list[Assignment] = []
         self._symbols = dict(known)
-        self._names = sp.numbered_symbols(prefix)
+        self._names = internal_symbols(prefix)
 
     def symbol_for(self, expr: sp.Expr) -> sp.Expr:
         if _trivial(expr):
