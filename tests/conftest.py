@@ -16,7 +16,8 @@ os.environ.setdefault("GAGEN_CACHE_DIR", str(_SESSION_CACHE))
 sys.path.insert(0, str(Path(__file__).parent))
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED_URDF = REPO.parent / "shared" / "urdf"
+# Copies of ../shared/urdf (licences alongside), so a clean clone tests the real robots.
+SHARED_URDF = REPO / "tests" / "data" / "urdf"
 
 
 def pytest_sessionfinish(session, exitstatus):

@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
+from gagen.app.cli import main
 from gagen.bench import timing
 from gagen.bench.common import cpu_model, find_urdf_dir, machine_info
 from gagen.bench.report import markdown, write_report
 from gagen.bench.scaling import scaling_models
 from gagen.bench.timing import Candidate, interleaved, loop_size, order, quartiles
-from gagen.cli import main
 
 
 class FakeClock:
@@ -207,6 +207,7 @@ def test_urdf_dir_is_found_or_skipped_with_a_note(tmp_path):
     assert models == ["chain:2", "chain:4", "chain:6"] and "ur5_robot.urdf" in notes[0]
 
 
+@pytest.mark.slow
 def test_bench_smoke_run_writes_the_report(tmp_path, cache_dir, capsys):
     out = tmp_path / "bench"
     assert main(["bench", "--out", str(out), "--smoke", "--cache-dir", str(cache_dir)]) == 0

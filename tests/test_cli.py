@@ -7,7 +7,7 @@ import re
 import pytest
 from conftest import REPO
 
-from gagen.cli import main, parser
+from gagen.app.cli import main, parser
 
 
 @pytest.mark.parametrize("command", ["build", "info", "simulate", "inverse", "paper", "bench"])

@@ -15,11 +15,11 @@ import pytest
 from conftest import REPO
 
 import gagen
-from gagen.build import build, generate_sources, module_name_for, source_key
-from gagen.codegen import COPIED_FILES, MODEL_C_FILES, generate
-from gagen.controllers import paper_controller
-from gagen.modelfile import parse_model_text
-from gagen.simulate import simulate
+from gagen.build.builder import build, generate_sources, module_name_for, source_key
+from gagen.codegen.render import COPIED_FILES, MODEL_C_FILES, generate
+from gagen.model.modelfile import parse_model_text
+from gagen.sim.controllers import paper_controller
+from gagen.sim.simulate import simulate
 
 GOLDEN = REPO / "generated" / "rrr"
 UPDATE_HINT = ("the generated C of 'rrr' changed; if that is intended, update the golden files "
@@ -53,7 +53,7 @@ def test_generation_is_byte_identical_across_processes(tmp_path):
     script = textwrap.dedent("""
         import hashlib, sys
         import gagen
-        from gagen.build import generate_sources
+        from gagen.build.builder import generate_sources
         generate_sources(gagen.resolve_model(sys.argv[1]), __import__("pathlib").Path(sys.argv[2]))
     """)
     digests = []
@@ -110,7 +110,8 @@ int main(void) {
     /* the paper's direct dynamics, 1 s under its PD law with gravity compensation */
     const double kp[3] = {500, 300, 200}, kd[3] = {300, 150, 100};
     const double target[3] = {-1.0471975511965976, -1.0471975511965976, -0.5235987755982988};
-    const gagen_control law = {GAGEN_CTRL_PD, kp, kd, target, 1, NULL, NULL, 0.0};
+    const gagen_control law = {GAGEN_CTRL_PD, kp, kd, target, 1, NULL, NULL, 0.0,
+                                NULL, NULL};
     const double y0[6] = {0}, atol[6] = {1e-8, 1e-8, 1e-8, 1e-8, 1e-8, 1e-8}, t_end = 1.0;
     double y[6];
     gagen_ode_stats stats;
@@ -210,7 +211,7 @@ def test_fast_math_is_opt_in_and_cached_separately(tmp_path):
 
 
 def test_changed_model_never_loads_stale_module(tmp_path):
-    text = (REPO / "src" / "gagen" / "models" / "rrr.yaml").read_text()
+    text = (REPO / "src" / "gagen" / "model" / "rrr.yaml").read_text()
     path = tmp_path / "arm.yaml"
     path.write_text(text)
     first = gagen.load(path, cache_dir=tmp_path / "cache")
@@ -239,7 +240,7 @@ def test_concurrent_builds_of_one_model_both_succeed(tmp_path):
 
 
 def test_interrupted_build_leaves_nothing_loadable(tmp_path, monkeypatch):
-    from gagen import build as build_module
+    from gagen.build import builder as build_module
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
@@ -251,7 +252,7 @@ def test_interrupted_build_leaves_nothing_loadable(tmp_path, monkeypatch):
 
 
 def test_compiler_errors_are_shown(tmp_path, monkeypatch):
-    from gagen import build as build_module
+    from gagen.build import builder as build_module
 
     real = build_module.generate_sources
 
@@ -261,8 +262,11 @@ def test_compiler_errors_are_shown(tmp_path, monkeypatch):
         return report
 
     monkeypatch.setattr(build_module, "generate_sources", broken)
-    with pytest.raises(build_module.BuildError, match="rhs.c"):
+    with pytest.raises(build_module.BuildError, match="rhs.c") as info:
         gagen.load("chain:2", cache_dir=tmp_path)
+    message = str(info.value)
+    assert "error" in message and "this is not C" in message  # the compiler's own words
+    assert "Traceback" not in message and "distutils" not in message
 
 
 def test_sources_only_generation_writes_every_file(tmp_path):
@@ -275,8 +279,8 @@ def test_sources_only_generation_writes_every_file(tmp_path):
 def test_small_models_inline_their_stages_and_large_ones_call_them():
     """simulation.c puts the position and velocity stages inline into the integrators only
     when they are small (INLINE_STAGE_OPS): a dozen copies of a large one compile slowly."""
-    from gagen.codegen import INLINE_STAGE_OPS
-    from gagen.gibbs_appell import derive
+    from gagen.codegen.render import INLINE_STAGE_OPS
+    from gagen.symbolic.gibbs_appell import derive
 
     for name, inline in (("rrr", True), ("chain:4", False)):
         text = generate(derive(gagen.resolve_model(name)), "m", "k").files["simulation.c"]

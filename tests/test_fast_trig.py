@@ -1,4 +1,4 @@
-"""The inline sin/cos of src/gagen/templates/gagen_math.h: accuracy, special cases, consistency.
+"""The inline sin/cos of src/gagen/codegen/templates/c/gagen_math.h: accuracy, special cases, consistency.
 
 A small C driver that includes the header is compiled with gcc into a shared library and
 called through ctypes on numpy arrays.  Reference values come from mpmath (120 bits).
@@ -20,7 +20,7 @@ mpmath = pytest.importorskip("mpmath")
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
 
-TEMPLATES = Path(__file__).resolve().parents[1] / "src" / "gagen" / "templates"
+TEMPLATES = Path(__file__).resolve().parents[1] / "src" / "gagen" / "codegen" / "templates" / "c"
 CFLAGS = ["-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-O2"]
 CUTOFF = 2.0**20  # GAGEN_TRIG_MAX: inline below, libm from there on
 MAX_ULP = 1.0

@@ -22,10 +22,10 @@ import numpy as np
 import pytest
 
 import gagen
-from gagen.cli import main as cli_main
-from gagen.codegen import c_identifier
-from gagen.modelfile import load_model_file
-from gagen.urdf import parse_urdf_text
+from gagen.app.cli import main as cli_main
+from gagen.codegen.render import c_identifier
+from gagen.model.modelfile import load_model_file
+from gagen.model.urdf import parse_urdf_text
 
 MARKER = "PWNED_BY_PAYLOAD"
 
@@ -267,7 +267,8 @@ def test_model_names_never_take_gagens_identifiers(name):
     assert ident.lower() not in {"integrator", "mass_matrix", "int", "gagen_math", "gagen_ode"}
 
 
-@pytest.mark.parametrize("name", ["integrator", "gagen_so", "math", "features"])
+@pytest.mark.parametrize("name", ["math", *(pytest.param(name, marks=pytest.mark.slow)
+                                           for name in ("integrator", "gagen_so", "features"))])
 def test_models_named_like_gagens_files_or_system_headers_build(tmp_path, cache_dir, name):
     """`integrator` and `gagen_so` collided with gagen's own header and symbols; `math` and
     `features` would shadow system headers if the build folder were on the include path."""
@@ -282,7 +283,8 @@ def test_models_named_like_gagens_files_or_system_headers_build(tmp_path, cache_
 # ------------------------------------------------------------------------- output paths
 
 
-@pytest.mark.parametrize("evil", ["../../escaped", "/tmp/absolute-escape", "..", "a/../../b"])
+@pytest.mark.parametrize("evil", ["../../escaped", *(pytest.param(evil, marks=pytest.mark.slow)
+                                   for evil in ("/tmp/absolute-escape", "..", "a/../../b"))])
 def test_model_names_never_choose_the_output_folder(tmp_path, cache_dir, monkeypatch, evil):
     """`simulate` and `inverse` without --out write into ./out/<identifier>, whatever the name."""
     work = tmp_path / "work" / "deep"

@@ -26,7 +26,7 @@ pytestmark = pytest.mark.skipif(
     GCC is None, reason="gcc not found on PATH: cannot compile integrator.c"
 )
 
-TEMPLATES = Path(__file__).resolve().parents[1] / "src" / "gagen" / "templates"
+TEMPLATES = Path(__file__).resolve().parents[1] / "src" / "gagen" / "codegen" / "templates" / "c"
 INTEGRATOR_C = TEMPLATES / "integrator.c"
 CFLAGS = ["-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", "-fPIC"]
 

@@ -16,10 +16,10 @@ from random_trees import random_model
 
 import gagen
 from gagen import PD, ComputedTorque, Eq11Trajectory
-from gagen.dynamics import SingularMassMatrixError
-from gagen.modelfile import parse_model_text
+from gagen.model.modelfile import parse_model_text
+from gagen.runtime.dynamics import SingularMassMatrixError
 
-RRR_TEXT = (REPO / "src" / "gagen" / "models" / "rrr.yaml").read_text()
+RRR_TEXT = (REPO / "src" / "gagen" / "model" / "rrr.yaml").read_text()
 
 
 @pytest.fixture(scope="module")
@@ -184,7 +184,7 @@ def test_the_cache_key_changes_when_the_generator_changes(tmp_path):
                     ignore=shutil.ignore_patterns("*.so", "__pycache__"))
     script = textwrap.dedent("""
         import gagen
-        from gagen.build import source_key
+        from gagen.build.builder import source_key
         print(source_key(gagen.resolve_model("chain:2")))
     """)
 
@@ -195,7 +195,8 @@ def test_the_cache_key_changes_when_the_generator_changes(tmp_path):
 
     before = key(copy)
     assert before == key(REPO / "src")
-    for module in ("codegen.py", "kinematics.py"):
+    for module in ("codegen/render.py", "symbolic/kinematics.py",
+                   "codegen/templates/model/rhs.c.j2"):
         path = copy / "gagen" / module
         path.write_text(path.read_text() + "\n# a change of the generator\n")
         after = key(copy)

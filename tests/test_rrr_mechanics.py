@@ -8,7 +8,7 @@ import sympy as sp
 
 import gagen
 from gagen.bench.peers import kane_rrr
-from gagen.gibbs_appell import derive, joint_torque_forces
+from gagen.symbolic.gibbs_appell import derive, joint_torque_forces
 
 
 @pytest.fixture(scope="module")

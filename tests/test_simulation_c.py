@@ -15,10 +15,10 @@ import pytest
 from random_trees import random_model
 
 import gagen
-from gagen.controllers import PD, ComputedTorque
-from gagen.dynamics import SingularMassMatrixError
-from gagen.simulate import simulate
-from gagen.trajectory import Eq11Trajectory
+from gagen.runtime.dynamics import SingularMassMatrixError
+from gagen.sim.controllers import PD, ComputedTorque
+from gagen.sim.simulate import simulate
+from gagen.sim.trajectory import Eq11Trajectory
 
 # the models of test_compiled.py (same seeds), so that the session's cache serves both
 MODELS = ("tree3", "tree11", "chain:7")

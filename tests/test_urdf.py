@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from gagen.merge import merge_fixed_joints
 from gagen.model import (
     WORLD,
     Body,
@@ -22,12 +21,10 @@ from gagen.model import (
     rotation_from_rpy,
     vector,
 )
-from gagen.urdf import load_urdf, parse_urdf_text
+from gagen.model.merge import merge_fixed_joints
+from gagen.model.urdf import load_urdf, parse_urdf_text
 
-URDF_DIR = Path(__file__).resolve().parents[2] / "shared" / "urdf"
-
-needs_urdfs = pytest.mark.skipif(not URDF_DIR.is_dir(),
-                                 reason=f"shared URDF folder {URDF_DIR} is missing")
+URDF_DIR = Path(__file__).resolve().parent / "data" / "urdf"
 
 # file -> (coordinates, bodies left after merging fixed joints)
 SHARED = {
@@ -74,7 +71,6 @@ def links_welded_to_root(path: Path) -> tuple[float, float]:
 
 # --- the shared robots ----------------------------------------------------------------------
 
-@needs_urdfs
 @pytest.mark.parametrize("filename", sorted(SHARED))
 def test_shared_urdf_coordinates_and_merged_bodies(filename):
     model = load_urdf(URDF_DIR / filename)
@@ -88,7 +84,6 @@ def test_shared_urdf_coordinates_and_merged_bodies(filename):
     assert model.gravity == vector([0, 0, -sp.Symbol("g")])
 
 
-@needs_urdfs
 @pytest.mark.parametrize("filename", sorted(SHARED))
 def test_shared_urdf_total_mass(filename):
     model = load_urdf(URDF_DIR / filename)
@@ -97,7 +92,6 @@ def test_shared_urdf_total_mass(filename):
     assert mass == pytest.approx(total - fixed_to_world, rel=1e-12)
 
 
-@needs_urdfs
 def test_total_mass_is_urdf_sum_minus_root_link():
     # Robots whose root link is the only link welded to the world.
     for filename, root_mass in (("panda.urdf", 0.629769), ("so100.urdf", 1.0),
@@ -112,7 +106,6 @@ def test_total_mass_is_urdf_sum_minus_root_link():
     assert sum(ur5.parameters[f"m_{b.name}"] for b in ur5.bodies) == pytest.approx(16.9939)
 
 
-@needs_urdfs
 def test_shared_urdf_names():
     assert load_urdf(URDF_DIR / "panda.urdf").name == "panda"
     assert load_urdf(URDF_DIR / "ur5_robot.urdf").name == "ur5"
@@ -120,7 +113,6 @@ def test_shared_urdf_names():
     assert load_urdf(URDF_DIR / "double_pendulum.urdf").name == "2dof_planar"
 
 
-@needs_urdfs
 def test_panda_limits_and_mimic():
     model = load_urdf(URDF_DIR / "panda.urdf")
     joints = {b.joint.name: b.joint for b in model.bodies}
@@ -133,7 +125,6 @@ def test_panda_limits_and_mimic():
     assert "panda_finger_joint2" in model.coordinates
 
 
-@needs_urdfs
 def test_so100_and_ur5_limits():
     so100 = {b.joint.name: b.joint for b in load_urdf(URDF_DIR / "so100.urdf").bodies}
     assert so100["elbow_flex"].limits == Limits(-3.14158, 0.0, 35.0, 1.0)
@@ -141,7 +132,6 @@ def test_so100_and_ur5_limits():
     assert ur5["wrist_1_joint"].limits == Limits(-6.28318530718, 6.28318530718, 28.0, 3.2)
 
 
-@needs_urdfs
 def test_panda_hand_merged_into_link7():
     model = load_urdf(URDF_DIR / "panda.urdf")
     bodies = {b.name: b for b in model.bodies}
@@ -163,7 +153,6 @@ def test_panda_hand_merged_into_link7():
     np.testing.assert_allclose(com, expected, rtol=1e-12)
 
 
-@needs_urdfs
 def test_ur5_children_of_world_welded_bodies():
     model = load_urdf(URDF_DIR / "ur5_robot.urdf")
     shoulder = model.bodies[0]
@@ -171,7 +160,6 @@ def test_ur5_children_of_world_welded_bodies():
     np.testing.assert_allclose(as_np(shoulder.joint.origin_xyz).ravel(), [0, 0, 0.089159])
 
 
-@needs_urdfs
 def test_mass_properties_are_parameters_with_urdf_defaults():
     model = load_urdf(URDF_DIR / "double_pendulum.urdf")
     link2 = model.bodies[1]

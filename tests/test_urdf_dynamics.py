@@ -22,15 +22,13 @@ import numpy as np
 import pytest
 
 import gagen
-from gagen.build import build
-from gagen.cli import main as cli_main
-from gagen.loading import resolve_model
+from gagen.app.cli import main as cli_main
+from gagen.build.builder import build
+from gagen.model.resolve import resolve_model
 
 pin = pytest.importorskip("pinocchio")
 
-URDF_DIR = Path(__file__).resolve().parents[2] / "shared" / "urdf"
-pytestmark = pytest.mark.skipif(not URDF_DIR.is_dir(),
-                                reason=f"shared URDF folder {URDF_DIR} is missing")
+URDF_DIR = Path(__file__).resolve().parent / "data" / "urdf"
 
 ROBOTS = ("double_pendulum", "so100", "ur5_robot", "panda")
 BACKENDS = ("lambdify", "compiled")

@@ -12,7 +12,7 @@ import yaml
 
 import gagen
 from gagen import ModelError
-from gagen.cli import main
+from gagen.app.cli import main
 
 BASE = {
     "name": "arm",
@@ -129,11 +129,11 @@ CASES = [
     ("boolean default", {"parameters__L": True}, "parameter 'L'", r"default value True is not"),
     ("null default", {"parameters__L": None}, "parameter 'L'", r"default value None is not"),
     ("list default", {"parameters__L": [1, 2]}, "parameter 'L'", r"is not a number"),
-    ("non-finite default", {"parameters__L": float("inf")}, "parameter 'L'", r"not finite"),
+    ("non-finite default", {"parameters__L": float("inf")}, "parameter 'L'", r"not a finite"),
     ("parameters not a mapping", {"parameters": [1, 2]}, "parameters", r"expected a mapping"),
     # unknown keys
-    ("unknown top-level key", {"colour": "red"}, "", r"unknown key\(s\) colour"),
-    ("unknown body key", {"bodies__1__masss": 2.0}, "body 'link2'", r"unknown key\(s\) masss"),
+    ("unknown top-level key", {"colour": "red"}, "", r"unknown key\(s\) 'colour'"),
+    ("unknown body key", {"bodies__1__masss": 2.0}, "body 'link2'", r"unknown key\(s\) 'masss'"),
     # expressions
     ("unparsable expression", {"bodies__1__mass": "m2*("}, "body 'link2', mass",
      r"cannot use 'm2\*\(': syntax error"),
@@ -284,7 +284,7 @@ def test_failed_build_writes_nothing(tmp_path, capsys):
 
 def test_build_failing_after_loading_writes_nothing(tmp_path, capsys, monkeypatch):
     """The model loads but the build fails later: no folder is left behind."""
-    from gagen import build as build_module
+    from gagen.build import builder as build_module
     from gagen.model import ModelError as Error
 
     def failing(model, *args, **kwargs):

@@ -52,6 +52,8 @@ typedef struct {
     int kind, gravity_compensation;
     double kp[GAGEN_SO_NQ], kd[GAGEN_SO_NQ], target[GAGEN_SO_NQ];
     double q0[GAGEN_SO_NQ], qf[GAGEN_SO_NQ], Tp;
+    gagen_poll_fn poll;
+    void *poll_ctx;
 } gagen_so_law;
 
 static void gagen_so_copy_or_zero(const double *src, double *dst)
@@ -77,7 +79,26 @@ static int gagen_so_law_init(gagen_so_law *law, const gagen_control *c)
     gagen_so_copy_or_zero(c->traj_q0, law->q0);
     gagen_so_copy_or_zero(c->traj_qf, law->qf);
     law->Tp = c->traj_Tp;
+    law->poll = c->poll;
+    law->poll_ctx = c->poll_ctx;
     return GAGEN_OK;
+}
+
+/* GAGEN_ERR_INTERRUPTED when the law's poll function, due every GAGEN_POLL_STEPS steps,
+ * says stop. */
+GAGEN_SO_INLINE int gagen_so_poll(const gagen_so_law *law, long step)
+{
+    if (law->poll != NULL && step % GAGEN_POLL_STEPS == 0 && law->poll(law->poll_ctx) != 0)
+        return GAGEN_ERR_INTERRUPTED;
+    return GAGEN_OK;
+}
+
+static int gagen_so_all_finite(const double *x, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i)
+        if (!isfinite(x[i])) return 0;
+    return 1;
 }
 
 /* Eq. 11: q_r(t) = q0 + (qf - q0)/Tp * (t - Tp/(2 pi) sin(2 pi t/Tp)) on [0, Tp], held at q0
@@ -242,6 +263,7 @@ static int gagen_so_dopri5(const gagen_control *c, const double *p, double t0, d
 
             rc = gagen_dp_attempt(&h_abs, min_step, &st.nsteps, max_steps, t, t1, direction,
                                   &h, &t_new);
+            if (rc == GAGEN_OK) rc = gagen_so_poll(&law, st.nsteps);
             if (rc != GAGEN_OK) return gagen_finish(stats, &st, rc, y_out, ie, n_eval, NY);
 
             gagen_dp_stage_input(NY, 0, NQ, 1, K, y, h, ytmp);
@@ -264,6 +286,9 @@ static int gagen_so_dopri5(const gagen_control *c, const double *p, double t0, d
             gagen_so_derivative(&law, p, t + h, Sb, y_new, K + GAGEN_DP_NSTAGES * NY);
 
             error_norm = gagen_dp_error_norm(NY, K, y, y_new, h, rtol, atol, root_n);
+            /* NaN would only shrink the step until it is too small: say what happened */
+            if (isnan(error_norm))
+                return gagen_finish(stats, &st, GAGEN_ERR_NONFINITE, y_out, ie, n_eval, NY);
             if (error_norm < 1)
                 ie = gagen_dp_dense_output(NY, K, y, y_new, t, h, t_new, direction, t_eval,
                                            n_eval, ie, y_out, Q);
@@ -356,6 +381,8 @@ static int gagen_so_rk4(const gagen_control *c, const double *p, double t0, doub
         double dt = t_new - t;
         int last = (k + 1 == nstep_total);
 
+        if ((rc = gagen_so_poll(&law, k + 1)) != GAGEN_OK) break;
+
         for (i = 0; i < NQ; ++i) q2[i] = y[i] + 0.5 * dt * k1[i];
         ++st.nfev;
         if ((rc = gagen_so_position(q2, p, Sa)) != 0) break;
@@ -375,6 +402,10 @@ static int gagen_so_rk4(const gagen_control *c, const double *p, double t0, doub
         gagen_rk4_solution(NQ, NY, y, dt, k1, k2, k3, k4, y_new);
         ++st.nsteps;
         ++st.naccepted;
+        if (!gagen_so_all_finite(y_new, NY)) {
+            rc = GAGEN_ERR_NONFINITE;
+            break;
+        }
 
         /* f(t_new, y_new) is the next step's k1; on the last step it is only
          * needed for interpolation, so don't spend an evaluation otherwise. */

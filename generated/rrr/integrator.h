@@ -27,6 +27,13 @@ extern "C" {
 #define GAGEN_ERR_STEP_TOO_SMALL (-101) /* step size fell below 10 ulp(t) */
 #define GAGEN_ERR_MAX_STEPS (-102)      /* max_steps step attempts used up */
 #define GAGEN_ERR_BAD_ARG (-103)        /* invalid argument (NULL, unsorted t_eval, ...) */
+#define GAGEN_ERR_INTERRUPTED (-104)    /* the poll function of a gagen_control said stop */
+#define GAGEN_ERR_NONFINITE (-105)      /* the state became NaN or inf */
+
+/* A simulation calls its poll function (if any) every GAGEN_POLL_STEPS steps: often enough
+ * to stop within milliseconds, rarely enough to cost nothing measurable. */
+#define GAGEN_POLL_STEPS 256
+typedef int (*gagen_poll_fn)(void *ctx);
 
 /* Right-hand side dy/dt = f(t, y).  Returns 0 on success, or a nonzero error
  * code that aborts the integration and becomes the integrator's status. */
@@ -99,6 +106,10 @@ typedef struct {
     int gravity_compensation; /* PD: add g(q) when nonzero */
     const double *traj_q0, *traj_qf;
     double traj_Tp;
+    /* Optional (NULL: never): called every GAGEN_POLL_STEPS steps of a simulation; a
+     * nonzero return stops it with GAGEN_ERR_INTERRUPTED (Python's Ctrl-C uses this). */
+    gagen_poll_fn poll;
+    void *poll_ctx;
 } gagen_control;
 
 #ifdef __cplusplus

@@ -25,8 +25,8 @@
  *   p[14] = I3y [0.05]
  *   p[15] = I3z [0.5333333333333333]
  */
-#ifndef GAGEN_RRR_H
-#define GAGEN_RRR_H
+#ifndef GAGEN_MODEL_RRR_H
+#define GAGEN_MODEL_RRR_H
 
 #include "integrator.h"
 
@@ -34,6 +34,8 @@
 #define RRR_NP 16
 /* returned by rrr_forward_dynamics when M(q) is singular or not positive definite */
 #define RRR_ERR_NOT_POSITIVE_DEFINITE 1
+/* returned instead when the factorisation met NaN or inf: the state was not finite */
+#define RRR_ERR_NONFINITE 2
 
 #ifdef __cplusplus
 extern "C" {

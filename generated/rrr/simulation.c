@@ -103,15 +103,18 @@ int gagen_so_position(const double *restrict q, const double *restrict p, double
     double D[3];
     D[0] = M[0];
     if (!(D[0] > 1e-13 * M[0]) || !(M[0] > 0.0))
-        return RRR_ERR_NOT_POSITIVE_DEFINITE;
+        return isfinite(D[0]) && isfinite(M[0]) ? RRR_ERR_NOT_POSITIVE_DEFINITE
+                                                          : RRR_ERR_NONFINITE;
     Dinv[0] = 1.0 / D[0];
     D[1] = M[4];
     if (!(D[1] > 1e-13 * M[4]) || !(M[4] > 0.0))
-        return RRR_ERR_NOT_POSITIVE_DEFINITE;
+        return isfinite(D[1]) && isfinite(M[4]) ? RRR_ERR_NOT_POSITIVE_DEFINITE
+                                                          : RRR_ERR_NONFINITE;
     Dinv[1] = 1.0 / D[1];
     D[2] = M[8] - (M[7]*M[7])*Dinv[1];
     if (!(D[2] > 1e-13 * M[8]) || !(M[8] > 0.0))
-        return RRR_ERR_NOT_POSITIVE_DEFINITE;
+        return isfinite(D[2]) && isfinite(M[8]) ? RRR_ERR_NOT_POSITIVE_DEFINITE
+                                                          : RRR_ERR_NONFINITE;
     Dinv[2] = 1.0 / D[2];
     return 0;
 }

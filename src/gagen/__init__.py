@@ -1,29 +1,55 @@
-"""gagen: compiled Gibbs-Appell equations of motion for trees of rigid bodies."""
+"""gagen: compiled Gibbs-Appell equations of motion for trees of rigid bodies.
 
-from .controllers import PD, ComputedTorque, paper_controller
-from .dynamics import SingularMassMatrixError
-from .gibbs_appell import Equations, derive
-from .loading import load, resolve_model
-from .model import Model, ModelError
-from .simulate import SimulationResult, inverse_dynamics_along, simulate
-from .trajectory import Eq11Trajectory
+`import gagen` and loading a model that is already built need neither SymPy nor a compiler:
+the names that derive equations (`derive`, `Equations`, `Model`, `resolve_model`) are
+imported on first use.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from .errors import BuildError, ModelError, NonFiniteStateError, SingularMassMatrixError
+from .loading import load
+from .sim.controllers import PD, ComputedTorque, paper_controller
+from .sim.simulate import SimulationResult, inverse_dynamics_along, simulate
+from .sim.trajectory import Eq11Trajectory
 
 __version__ = "0.1.0"
 
+_LAZY = {
+    "derive": ".symbolic.gibbs_appell",
+    "Equations": ".symbolic.gibbs_appell",
+    "Model": ".model.model",
+    "resolve_model": ".model.resolve",
+}
+
 __all__ = [
-           "PD",
-           "ComputedTorque",
-           "Eq11Trajectory",
-           "Equations",
-           "Model",
-           "ModelError",
-           "SimulationResult",
-           "SingularMassMatrixError",
-           "__version__",
-           "derive",
-           "inverse_dynamics_along",
-           "load",
-           "paper_controller",
-           "resolve_model",
-           "simulate",
+    "PD",
+    "BuildError",
+    "ComputedTorque",
+    "Eq11Trajectory",
+    "Equations",
+    "Model",
+    "ModelError",
+    "NonFiniteStateError",
+    "SimulationResult",
+    "SingularMassMatrixError",
+    "__version__",
+    "derive",
+    "inverse_dynamics_along",
+    "load",
+    "paper_controller",
+    "resolve_model",
+    "simulate",
 ]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
+    raise AttributeError(f"module 'gagen' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

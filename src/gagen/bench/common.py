@@ -149,7 +149,7 @@ def compiled(model, cache_dir: Path, verbose: bool = False):
     Returns (dyn, report, {"build_s", "load_s"}). Unlike `gagen.load`, never picks a
     module shipped with the package: the module timed is the one just built.
     """
-    from ..build import build, dynamics_class, import_extension
+    from ..build.builder import build, dynamics_class, import_extension
 
     start = time.perf_counter()
     path, report = build(model, cache_dir=cache_dir, verbose=verbose)

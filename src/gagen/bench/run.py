@@ -84,9 +84,9 @@ class Bench:
         if self._rrr is None and self._rrr_error:
             raise RuntimeError(f"rrr could not be built: {self._rrr_error}")
         if self._rrr is None:
-            from ..gibbs_appell import derive
-            from ..lambdify_backend import LambdifyDynamics
-            from ..loading import resolve_model
+            from ..model.resolve import resolve_model
+            from ..runtime.lambdify import LambdifyDynamics
+            from ..symbolic.gibbs_appell import derive
 
             model = resolve_model("rrr")
             self.progress("setup", f"building rrr into {self.cache_dir}")
@@ -161,7 +161,7 @@ class Bench:
         return {"rows": rows, "repeats": s.scaling_repeats}
 
     def panda(self) -> dict:
-        from ..loading import resolve_model
+        from ..model.resolve import resolve_model
         from .percall import panda_rows
 
         s = self.settings

@@ -59,7 +59,7 @@ def _slug(name: str) -> str:
 
 def build_row(name: str, cache_dir: Path) -> tuple[dict, object]:
     """Build one model cold into `cache_dir`; the row (without FD timing) and its dynamics."""
-    from ..loading import resolve_model
+    from ..model.resolve import resolve_model
 
     model = resolve_model(name)
     clear_cache()  # a cold derivation: nothing reused from earlier models
@@ -149,9 +149,9 @@ def derivation_rows(names, repeats: int = 3) -> list[dict]:
     SymPy's cache is cleared before each timed derivation: a repeat would otherwise reuse
     the previous run's results and take a fraction of the time of a first derivation.
     """
-    from ..codegen import CSEResult
-    from ..gibbs_appell import derive
-    from ..loading import resolve_model
+    from ..codegen.cse import CSEResult
+    from ..model.resolve import resolve_model
+    from ..symbolic.gibbs_appell import derive
 
     rows = []
     for name in names:

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..controllers import paper_controller
-from ..simulate import simulate
+from ..sim.controllers import paper_controller
+from ..sim.simulate import simulate
 from .timing import Candidate, interleaved
 
 REPEATS = 7

@@ -1,0 +1,523 @@
+"""Derive, generate and compile a model into an extension module, with an on-disk cache.
+
+A build happens in a private temporary folder next to its cache entry and is renamed
+into place only when complete, so an interrupted build or two processes building the
+same model never leave a half-written module that a later `load` would pick up.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import hashlib
+import importlib
+import importlib.util
+import os
+import shlex
+import shutil
+import socket
+import subprocess
+import sys
+import sysconfig
+import tempfile
+import time
+import warnings
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+from .. import __version__
+from ..codegen.render import MODEL_C_FILES, c_identifier, generate, write_sources
+from ..errors import BuildError, CompilerNotFoundError
+from ..model.model import Model
+from ..runtime.dynamics import DynamicsInfo
+from ..symbolic.gibbs_appell import derive
+
+DEFAULT_FLAGS = ("-O3",)
+FAST_MATH_FLAGS = ("-ffast-math",)
+# One version of the kernels for any CPU of the architecture: no FMA clone (gagen_math.h)
+PORTABLE_FLAGS = ("-DGAGEN_KERNEL=",)
+_loaded_modules: dict[str, object] = {}
+
+
+@dataclass
+class BuildReport:
+    """What a build did, stage by stage (seconds) and the operation counts."""
+
+    model: str
+    module_name: str
+    folder: Path
+    stages: dict[str, float] = field(default_factory=dict)
+    ops_before_cse: int = 0
+    ops_after_cse: int = 0
+    cached: bool = False
+
+
+# The sub-packages whose code (and templates) decides what the generated sources say.
+GENERATOR_PACKAGES = ("symbolic", "codegen")
+
+
+def generator_digest() -> str:
+    """A hash of the generator's own code and templates, so that a changed generator never
+    reuses a build: every file of the symbolic and codegen stages, in a fixed order."""
+    h = hashlib.sha256()
+    for package in GENERATOR_PACKAGES:
+        root = resources.files(f"gagen.{package}")
+        for path in sorted(_files(root), key=lambda item: item[0]):
+            h.update(path[0].encode())
+            h.update(path[1].read_bytes())
+    return h.hexdigest()
+
+
+def _files(folder, prefix: str = ""):
+    """(relative name, traversable) of every source and template file under a folder."""
+    for item in folder.iterdir():
+        name = f"{prefix}{item.name}"
+        if item.is_dir():
+            if item.name != "__pycache__":
+                yield from _files(item, name + "/")
+        elif item.name.endswith((".py", ".j2", ".h", ".c")):
+            yield name, item
+
+
+def source_key(model: Model) -> str:
+    """Hash of what the generated sources depend on: model, parameter names, generator, templates."""
+    h = hashlib.sha256()
+    for part in (model.canonical(), ",".join(model.parameters), __version__, generator_digest()):
+        h.update(part.encode())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def module_name_for(model: Model, key: str) -> str:
+    return f"gagen_{c_identifier(model.name)}_{key[:12]}"
+
+
+def compile_flags(fast_math: bool = False, portable: bool = False) -> list[str]:
+    """The compiler flags: -O3, plus -ffast-math on request, plus no per-CPU kernel clones
+    with `portable` (for a module copied to other machines, and to test that version)."""
+    return (list(DEFAULT_FLAGS) + (list(FAST_MATH_FLAGS) if fast_math else [])
+            + (list(PORTABLE_FLAGS) if portable else []))
+
+
+def build_key(src_key: str, flags: list[str]) -> str:
+    """Hash of the sources plus what the binary depends on: flags, Python ABI, NumPy, Cython."""
+    import Cython
+    import numpy
+
+    h = hashlib.sha256()
+    for part in (src_key, " ".join(flags), sysconfig.get_config_var("EXT_SUFFIX") or "",
+                 numpy.__version__, Cython.__version__, sys.version):
+        h.update(part.encode())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def default_cache_dir() -> Path:
+    """$GAGEN_CACHE_DIR, else the user's cache folder ($XDG_CACHE_HOME or ~/.cache)/gagen.
+
+    An empty or relative $XDG_CACHE_HOME is ignored, as the XDG specification says: the cache
+    never lands relative to the working directory.
+    """
+    env = os.environ.get("GAGEN_CACHE_DIR", "").strip()
+    if env:
+        return Path(env).expanduser()
+    if sys.platform == "darwin":
+        return Path.home() / "Library" / "Caches" / "gagen"
+    if os.name == "nt":
+        return Path(os.environ.get("LOCALAPPDATA") or Path.home()) / "gagen" / "Cache"
+    xdg = os.environ.get("XDG_CACHE_HOME", "").strip()
+    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".cache"
+    return base / "gagen"
+
+
+class CacheWarning(UserWarning):
+    """The cache could not be used as it was: an entry was rebuilt, or a temporary folder
+    stands in for an unwritable cache."""
+
+
+class Progress:
+    """Prints each stage and its time when verbose."""
+
+    def __init__(self, report: BuildReport, verbose: bool):
+        self.report, self.verbose = report, verbose
+
+    def stage(self, name: str, seconds: float, detail: str = "") -> None:
+        self.report.stages[name] = seconds
+        if self.verbose:
+            extra = f"  {detail}" if detail else ""
+            print(f"gagen: {name:<9} {seconds:7.2f} s{extra}", file=sys.stderr, flush=True)
+
+    def say(self, text: str) -> None:
+        if self.verbose:
+            print(f"gagen: {text}", file=sys.stderr, flush=True)
+
+
+def generate_sources(model: Model, folder: Path, progress: Progress | None = None,
+                     report: BuildReport | None = None) -> BuildReport:
+    """Derive and generate a model's sources into `folder` (no compilation)."""
+    key = source_key(model)
+    name = module_name_for(model, key)
+    report = report or BuildReport(model.name, name, folder)
+    progress = progress or Progress(report, verbose=False)
+    progress.say("deriving the Gibbs-Appell equations...")
+    start = time.perf_counter()
+    eqs = derive(model)
+    progress.stage("derive", time.perf_counter() - start,
+                   f"{model.dof} coordinates, {len(eqs.intermediates)} intermediates")
+    progress.say("generating C (one CSE pass over every output)...")
+    start = time.perf_counter()
+    code = generate(eqs, name, key)
+    write_sources(code, folder)
+    report.ops_before_cse, report.ops_after_cse = code.ops_before, code.ops_after
+    progress.stage("generate", time.perf_counter() - start,
+                   f"{code.ops_before} operations before CSE, {code.ops_after} after "
+                   f"(CSE {code.cse_seconds:.2f} s)")
+    return report
+
+
+def compiler_command() -> list[str]:
+    """The C compiler as a command: $CC if set (and not blank), else Python's own compiler."""
+    for candidate in (os.environ.get("CC", ""), sysconfig.get_config_var("CC") or "", "cc"):
+        try:
+            words = shlex.split(candidate)
+        except ValueError:
+            words = []
+        if words and words[0].strip():
+            return words
+    return ["cc"]
+
+
+def check_compiler() -> list[str]:
+    """The compiler command, or CompilerNotFoundError saying what to install or use instead."""
+    cc = compiler_command()
+    if shutil.which(cc[0]) is None:
+        raise CompilerNotFoundError(
+            f"no C compiler found (looked for '{cc[0]}'); install one (e.g. gcc), or use the "
+            "pure-Python backend: gagen.load(model, backend=\"lambdify\")")
+    return cc
+
+
+def _config_words(name: str) -> list[str]:
+    return shlex.split(sysconfig.get_config_var(name) or "")
+
+
+def _env_words(name: str) -> list[str]:
+    try:
+        return shlex.split(os.environ.get(name, ""))
+    except ValueError:
+        return []
+
+
+def _compile_commands(cc: list[str], folder: Path, module_name: str,
+                      flags: list[str]) -> list[list[str]]:
+    """One compiler command per C file (largest first, so the biggest overlaps the rest).
+
+    Python's own flags (CFLAGS, CCSHARED) as distutils would use them, then $CFLAGS and
+    $CPPFLAGS, then gagen's. The sources include each other with quotes, found next to
+    them; "." is not on the include path, so a model header cannot shadow a system
+    header (a model named `math`).
+    """
+    import numpy
+
+    includes = [f"-I{numpy.get_include()}", f"-I{sysconfig.get_paths()['include']}"]
+    # Python's -g would make the compiler write debug information for very large functions
+    python_flags = [w for w in _config_words("CFLAGS") if w != "-g"]
+    base = [*cc, *python_flags, *_config_words("CCSHARED"), *_env_words("CPPFLAGS"),
+            *_env_words("CFLAGS"), *includes, "-DNPY_NO_DEPRECATED_API=NPY_1_7_API_VERSION"]
+    sources = sorted([f"{module_name}.c", *MODEL_C_FILES],
+                     key=lambda name: -(folder / name).stat().st_size)
+    return [[*base, "-c", source, "-o", f"{source}.o", *flags] for source in sources]
+
+
+def _link_command(cc: list[str], module_name: str, suffix: str) -> list[str]:
+    """The link command as distutils builds it: $LDSHARED, else Python's LDSHARED with its
+    compiler replaced by $CC when that is set."""
+    ldshared = os.environ.get("LDSHARED", "").strip() or sysconfig.get_config_var("LDSHARED") or ""
+    python_cc = sysconfig.get_config_var("CC") or ""
+    if os.environ.get("CC", "").strip() and python_cc and ldshared.startswith(python_cc):
+        ldshared = shlex.join(cc) + ldshared[len(python_cc):]
+    linker = shlex.split(ldshared) or [*cc, "-shared"]
+    objects = [f"{source}.o" for source in (f"{module_name}.c", *MODEL_C_FILES)]
+    return [*linker, *_env_words("LDFLAGS"), *objects, "-o", f"{module_name}{suffix}", "-lm"]
+
+
+def _run_tool(commands: list[list[str]], folder: Path, what: str, workers: int = 2) -> None:
+    """Run commands in `folder`, `workers` at a time; BuildError with their own output."""
+    failures = []
+    pending = list(commands)
+    running: list[tuple[list[str], subprocess.Popen]] = []
+    try:
+        while pending or running:
+            while pending and len(running) < workers:
+                command = pending.pop(0)
+                running.append((command, subprocess.Popen(
+                    command, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                    text=True, errors="replace")))
+            command, proc = running.pop(0)
+            output, _ = proc.communicate()
+            if proc.returncode != 0:
+                failures.append(f"$ {' '.join(command[:1] + command[-6:])}\n{output.strip()}")
+    finally:
+        for _, proc in running:  # interrupted: stop the compilers still running
+            proc.kill()
+            proc.wait()
+    if failures:
+        shown = "\n".join(failures)
+        lines = shown.splitlines()
+        if len(lines) > 60:
+            shown = "\n".join(lines[:60] + [f"... ({len(lines) - 60} more lines)"])
+        raise BuildError(f"{what} failed in {folder}:\n{shown}")
+
+
+def compile_sources(folder: Path, module_name: str, flags: list[str], verbose: bool) -> Path:
+    """Cythonize and compile the sources in `folder`; return the module's path.
+
+    Cython runs as `python -m cython`; the C files are compiled two at a time with the
+    compiler Python was built with (or $CC), then linked. A failure raises BuildError with
+    the tool's own messages, never a traceback of gagen's.
+    """
+    cc = check_compiler()
+    suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
+    _run_tool([[sys.executable, "-m", "cython", "-3", "--fast-fail", f"{module_name}.pyx",
+                "-o", f"{module_name}.c"]], folder, f"Cython on {module_name}.pyx")
+    _run_tool(_compile_commands(cc, folder, module_name, flags), folder, f"compiling {module_name}")
+    _run_tool([_link_command(cc, module_name, suffix)], folder, f"linking {module_name}")
+    path = folder / f"{module_name}{suffix}"
+    if not path.exists():
+        raise BuildError(f"the compiler reported success but {path} is missing")
+    for obj in folder.glob("*.o"):
+        obj.unlink()
+    return path
+
+
+def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
+          fast_math: bool = False, verbose: bool = False, portable: bool = False
+          ) -> tuple[Path, BuildReport]:
+    """Derive, generate and compile; return the extension's path and what was done.
+
+    With `out`, the sources and the module are written there. Otherwise the cache is used:
+    an entry whose module matches its stored checksum is reused as it is; a corrupt or
+    incomplete one is rebuilt with a CacheWarning.
+    """
+    flags = compile_flags(fast_math, portable)
+    src_key = source_key(model)
+    name = module_name_for(model, src_key)
+    suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
+    if out is None:
+        cache = usable_cache_dir(Path(cache_dir) if cache_dir else default_cache_dir())
+        final = cache / f"{name}-{build_key(src_key, flags)[:16]}"
+        if cached_module_is_intact(final, f"{name}{suffix}"):
+            return final / f"{name}{suffix}", BuildReport(model.name, name, final, cached=True)
+        if final.exists():
+            warnings.warn(f"gagen: the cache entry {final} is corrupt or incomplete "
+                          "(its module does not match its checksum); rebuilding it",
+                          CacheWarning, stacklevel=3)
+            discard_cache_entry(final)
+        clean_abandoned_builds(cache)
+    else:
+        final = Path(out)
+    report = BuildReport(model.name, name, final)
+    progress = Progress(report, verbose)
+    progress.say(f"building '{model.name}' ({model.dof} coordinates) into {final}")
+    created = _make_parents(final.parent)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=final.parent))
+    try:
+        (tmp / _OWNER_FILE).write_text(f"{socket.gethostname()} {os.getpid()}\n")
+        generate_sources(model, tmp, progress, report)
+        progress.say(f"compiling with {' '.join(flags)} (Cython and the C compiler, "
+                     "usually 5-15 s)...")
+        start = time.perf_counter()
+        module = compile_sources(tmp, name, flags, verbose)
+        if out is None:  # the cache checks its modules before import; an --out folder is the user's
+            (tmp / _CHECKSUM_FILE).write_text(_checksum(module))
+        (tmp / _OWNER_FILE).unlink()
+        progress.stage("compile", time.perf_counter() - start, " ".join(flags))
+        _publish(tmp, final, replace=out is not None)
+        created = []
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        for folder in reversed(created):  # a failed build leaves no new folders behind
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+    return final / f"{name}{suffix}", report
+
+
+# --- the cache's own integrity ---------------------------------------------------------------
+
+_CHECKSUM_FILE = "module.sha256"
+_OWNER_FILE = "building.pid"
+ABANDONED_AFTER_SECONDS = 24 * 3600  # a build folder without an owner file: assume dead
+_fallback_cache: Path | None = None
+
+
+def _checksum(module: Path) -> str:
+    """'<sha256> <size> <file name>' of a module, as stored next to it."""
+    data = module.read_bytes()
+    return f"{hashlib.sha256(data).hexdigest()} {len(data)} {module.name}\n"
+
+
+def cached_module_is_intact(entry: Path, module_file: str) -> bool:
+    """Whether a cache entry's module exists and matches its checksum.
+
+    Checked before every import: importing a truncated shared library kills the process
+    (SIGBUS) where no exception can be caught.
+    """
+    module = entry / module_file
+    try:
+        expected = (entry / _CHECKSUM_FILE).read_text().split()
+        if len(expected) != 3 or expected[2] != module_file:
+            return False
+        if module.stat().st_size != int(expected[1]):
+            return False
+        return _checksum(module).split() == expected
+    except (OSError, ValueError):
+        return False
+
+
+def discard_cache_entry(entry: Path) -> None:
+    """Remove a cache entry: renamed aside first, so no process ever sees half of it."""
+    trash = entry.with_name(f".{entry.name}-discarded-{os.getpid()}-{time.monotonic_ns()}")
+    try:
+        os.rename(entry, trash)
+    except OSError:
+        return  # gone already, or another process is discarding it
+    shutil.rmtree(trash, ignore_errors=True)
+
+
+def clean_abandoned_builds(cache: Path) -> None:
+    """Remove build folders left by killed processes (`kill -9`, a power cut).
+
+    A build folder holds its owner's host and pid; it is abandoned when that process no
+    longer runs on this host, or, without an owner file, when it is a day old.
+    """
+    host = socket.gethostname()
+    try:
+        entries = [p for p in cache.iterdir() if p.name.startswith(".gagen_") and p.is_dir()]
+    except OSError:
+        return
+    for folder in entries:
+        if _is_abandoned(folder, host):
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def _is_abandoned(folder: Path, host: str) -> bool:
+    try:
+        owner = (folder / _OWNER_FILE).read_text().split()
+    except OSError:
+        try:
+            return time.time() - folder.stat().st_mtime > ABANDONED_AFTER_SECONDS
+        except OSError:
+            return False
+    if len(owner) != 2 or owner[0] != host or not owner[1].isdigit():
+        return False  # another machine's build on a shared cache: not ours to judge
+    try:
+        os.kill(int(owner[1]), 0)
+    except ProcessLookupError:
+        return True
+    except (PermissionError, OverflowError):
+        return False
+    return False
+
+
+def usable_cache_dir(cache: Path) -> Path:
+    """`cache`, created if needed, or a private temporary folder (with a CacheWarning) when
+    it cannot be written: a path that is a file, read-only, or unreachable."""
+    global _fallback_cache
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+        probe = Path(tempfile.mkdtemp(prefix=".gagen-probe-", dir=cache))
+        probe.rmdir()
+        return cache
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+    if _fallback_cache is None:
+        _fallback_cache = Path(tempfile.mkdtemp(prefix="gagen-cache-"))
+    warnings.warn(f"gagen: cannot write the cache folder {cache} ({reason}); building in "
+                  f"{_fallback_cache} for this process instead. Set GAGEN_CACHE_DIR or "
+                  "cache_dir= to a writable folder to keep builds.", CacheWarning, stacklevel=4)
+    return _fallback_cache
+
+
+def _make_parents(folder: Path) -> list[Path]:
+    """Create a folder and its missing parents; return those created, outermost first."""
+    missing = []
+    while not folder.exists():
+        missing.append(folder)
+        folder = folder.parent
+    for path in reversed(missing):
+        path.mkdir(exist_ok=True)
+    return list(reversed(missing))
+
+
+def _publish(tmp: Path, final: Path, replace: bool) -> None:
+    """Move a finished build into place in one rename."""
+    if replace and final.exists():
+        for item in tmp.iterdir():
+            os.replace(item, final / item.name)
+        return
+    try:
+        os.rename(tmp, final)
+    except OSError:
+        if not (final.exists() and any(final.iterdir())):
+            raise
+        # another process finished the same build first: keep theirs
+
+
+def import_extension(path: Path, module_name: str):
+    key = str(path.resolve())
+    module = _loaded_modules.get(key)
+    if module is None:
+        spec = importlib.util.spec_from_file_location(module_name, path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        _loaded_modules[key] = module
+    return module
+
+
+def shipped_module(model: Model, fast_math: bool, portable: bool = False):
+    """The module compiled at install time from `generated/`, if it matches this model."""
+    if fast_math or portable:
+        return None
+    name = module_name_for(model, source_key(model))
+    try:
+        return importlib.import_module(f"gagen.shipped.{name}")
+    except ImportError:
+        return None
+
+
+@functools.cache
+def dynamics_class(module):
+    """The user-facing class: the compiled kernels plus the shared names and parameters."""
+    return type("CompiledDynamics", (module.CompiledModel, DynamicsInfo),
+                {"backend": "compiled", "__module__": "gagen.build"})
+
+
+def load_compiled(model: Model, cache_dir: Path | None = None, fast_math: bool = False,
+                  verbose: bool | None = None, portable: bool = False):
+    """The compiled backend of `gagen.load`: shipped module, cached module, or a new build."""
+    key = source_key(model)
+    module = shipped_module(model, fast_math, portable)
+    if module is None:
+        options = {"cache_dir": cache_dir, "fast_math": fast_math, "portable": portable,
+                       "verbose": True if verbose is None else verbose}
+        path, report = build(model, **options)
+        try:
+            module = import_extension(path, report.module_name)
+        except ImportError as exc:
+            if not report.cached:
+                raise BuildError(f"the module just built for '{model.name}' does not import: "
+                                 f"{exc}") from None
+            # intact bytes that do not import (a library it links against changed): rebuild
+            warnings.warn(f"gagen: the cached module {path} does not import ({exc}); "
+                          "rebuilding it", CacheWarning, stacklevel=2)
+            discard_cache_entry(path.parent)
+            path, report = build(model, **options)
+            module = import_extension(path, report.module_name)
+    if module.KEY != key:
+        raise BuildError(f"module {module.__name__} was not built from this version of "
+                         f"model '{model.name}' (its key {module.KEY[:12]}, expected {key[:12]})")
+    dyn = dynamics_class(module)()
+    dyn.model = model
+    dyn.module = module
+    return dyn

@@ -1,0 +1,92 @@
+"""Common-subexpression elimination over every output at once, in one dependency order.
+
+The derivation's intermediates and all outputs (mass matrix, forcing, inverse dynamics,
+gravity, energy) go through `sympy.cse` together, so a subexpression shared anywhere is
+computed once. Each C function then takes the assignments its outputs depend on, in the
+one order shared by all functions.
+"""
+
+from __future__ import annotations
+
+import heapq
+import time
+from dataclasses import dataclass, field
+
+import sympy as sp
+
+from ..symbolic.gibbs_appell import Equations
+from ..symbolic.symbols import internal_symbols
+
+
+@dataclass
+class Assignment:
+    symbol: sp.Symbol
+    expr: sp.Expr
+    deps: frozenset = field(default_factory=frozenset)
+
+
+class CSEResult:
+    """All assignments in one dependency order, and the reduced output expressions."""
+
+    def __init__(self, eqs: Equations):
+        outputs = eqs.outputs()
+        defs = eqs.intermediates
+        flat = [e for v in outputs.values() for e in v]
+        self.ops_before = _ops(e for _, e in defs) + _ops(flat)
+        start = time.perf_counter()
+        temps, reduced = sp.cse([e for _, e in defs] + flat,
+                                symbols=internal_symbols("_x"), order="canonical")
+        self.seconds = time.perf_counter() - start
+        reduced_defs, reduced_out = reduced[: len(defs)], reduced[len(defs):]
+        assignments = [Assignment(s, e) for s, e in temps]
+        assignments += [Assignment(s, e) for (s, _), e in zip(defs, reduced_defs)]
+        self.assignments = _dependency_order(assignments)
+        self.outputs: dict[str, list[sp.Expr]] = {}
+        k = 0
+        for key, values in outputs.items():
+            self.outputs[key] = reduced_out[k: k + len(values)]
+            k += len(values)
+        self.ops_after = _ops(a.expr for a in self.assignments) + _ops(reduced_out)
+
+    def needed(self, exprs) -> list[Assignment]:
+        """The assignments these expressions depend on, in the shared order."""
+        defined = {a.symbol: a for a in self.assignments}
+        need: set[sp.Symbol] = set()
+        stack = [s for e in exprs for s in e.free_symbols if s in defined]
+        while stack:
+            s = stack.pop()
+            if s not in need:
+                need.add(s)
+                stack.extend(d for d in defined[s].deps if d not in need)
+        return [a for a in self.assignments if a.symbol in need]
+
+
+def _ops(exprs) -> int:
+    return sum(sp.count_ops(e) for e in exprs)
+
+
+def _dependency_order(assignments: list[Assignment]) -> list[Assignment]:
+    """Topological order; among ready assignments the earliest given comes first."""
+    by_symbol = {a.symbol: k for k, a in enumerate(assignments)}
+    for a in assignments:
+        a.deps = frozenset(s for s in a.expr.free_symbols if s in by_symbol)
+    waiting = {k: len(a.deps) for k, a in enumerate(assignments)}
+    users: dict[int, list[int]] = {k: [] for k in range(len(assignments))}
+    for k, a in enumerate(assignments):
+        for d in a.deps:
+            users[by_symbol[d]].append(k)
+    ready = [k for k, count in waiting.items() if count == 0]
+    heapq.heapify(ready)
+    order = []
+    while ready:
+        k = heapq.heappop(ready)
+        order.append(assignments[k])
+        for u in users[k]:
+            waiting[u] -= 1
+            if waiting[u] == 0:
+                heapq.heappush(ready, u)
+    if len(order) != len(assignments):
+        raise RuntimeError("cyclic intermediate definitions")
+    return order
+
+

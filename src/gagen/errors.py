@@ -1,0 +1,43 @@
+"""Every exception and warning a user of gagen can meet, in one place (and no SymPy here).
+
+- `ModelError`: a description that cannot be used; names the file, the element, the reason.
+- `BuildError` (and `CompilerNotFoundError`): generated code that did not compile.
+- `SingularMassMatrixError`: M(q) is singular or not positive definite at a state.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class ModelError(ValueError):
+    """A model that cannot be used; the message names the file, the element and the reason."""
+
+    def __init__(self, source: str, element: str, reason: str):
+        self.source, self.element, self.reason = source, element, reason
+        where = f"{source}: {element}" if element else source
+        super().__init__(one_line(f"{where}: {reason}"))
+
+
+def one_line(text: str) -> str:
+    """`text` with line breaks and other control characters escaped, so that a name taken
+    from a description cannot forge extra lines in a terminal or a log."""
+    return "".join(ch if ch.isprintable() else ascii(ch)[1:-1] for ch in text)
+
+
+class NonFiniteStateError(ValueError):
+    """The dynamics met NaN or inf where they need finite numbers: in the state given, or,
+    in a simulation, in a state the motion reached (a controller's NaN torques, a motion
+    that diverged)."""
+
+
+class BuildError(RuntimeError):
+    """Generated code did not compile; the message holds the compiler's output."""
+
+
+class CompilerNotFoundError(BuildError):
+    """No C compiler: the compiled backend cannot be built here."""
+
+
+class SingularMassMatrixError(np.linalg.LinAlgError):
+    """The mass matrix is singular or not positive definite at the given state."""

@@ -1,0 +1,281 @@
+"""The robot model: a tree of rigid bodies joined by joints, with symbolic parameters.
+
+Frames follow URDF: each body's frame is its joint frame. A joint's origin places the
+joint frame in the parent's frame; the joint then rotates about (revolute, continuous)
+or slides along (prismatic) its axis, given in the joint frame.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import sympy as sp
+
+from ..errors import ModelError
+
+JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
+WORLD = "world"
+
+
+def rotation_from_rpy(roll, pitch, yaw) -> sp.ImmutableMatrix:
+    """URDF's fixed-axis roll-pitch-yaw: R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    return sp.ImmutableMatrix(_rot_z(yaw) * _rot_y(pitch) * _rot_x(roll))
+
+
+def _trig(angle):
+    if isinstance(angle, (int, float)) or (isinstance(angle, sp.Basic) and angle.is_Number):
+        value = float(angle)
+        if value == 0.0:
+            return sp.Integer(1), sp.Integer(0)
+        return sp.Float(math.cos(value)), sp.Float(math.sin(value))
+    return sp.cos(angle), sp.sin(angle)
+
+
+def _rot_x(a):
+    c, s = _trig(a)
+    return sp.Matrix([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _rot_y(a):
+    c, s = _trig(a)
+    return sp.Matrix([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def _rot_z(a):
+    c, s = _trig(a)
+    return sp.Matrix([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def vector(values) -> sp.ImmutableMatrix:
+    return sp.ImmutableMatrix(3, 1, [sp.sympify(v) for v in values])
+
+
+def inertia_matrix(ixx, iyy, izz, ixy=0, ixz=0, iyz=0) -> sp.ImmutableMatrix:
+    return sp.ImmutableMatrix(
+        [[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]]
+    ).applyfunc(sp.sympify)
+
+
+IDENTITY = sp.ImmutableMatrix(sp.eye(3))
+ZERO3 = sp.ImmutableMatrix(sp.zeros(3, 1))
+ZERO33 = sp.ImmutableMatrix(sp.zeros(3, 3))
+ZERO = sp.Integer(0)
+
+
+@dataclass(frozen=True)
+class Limits:
+    lower: float | None = None
+    upper: float | None = None
+    effort: float | None = None
+    velocity: float | None = None
+
+
+@dataclass(frozen=True)
+class Joint:
+    """The joint that attaches a body to its parent."""
+
+    name: str
+    type: str
+    origin_xyz: sp.ImmutableMatrix = ZERO3
+    origin_rotation: sp.ImmutableMatrix = IDENTITY
+    axis: sp.ImmutableMatrix = field(default_factory=lambda: vector([0, 0, 1]))
+    limits: Limits | None = None
+    mimic: str | None = None  # metadata only: a mimic joint is an independent coordinate
+
+    @property
+    def moves(self) -> bool:
+        return self.type != "fixed"
+
+    @property
+    def rotates(self) -> bool:
+        return self.type in ("revolute", "continuous")
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid body; mass centre and central inertia are given in the body's frame."""
+
+    name: str
+    parent: str
+    joint: Joint
+    mass: sp.Expr = ZERO
+    com: sp.ImmutableMatrix = ZERO3
+    inertia: sp.ImmutableMatrix = ZERO33
+
+
+@dataclass(frozen=True)
+class Model:
+    """A validated tree of bodies. Bodies are stored parents first."""
+
+    name: str
+    bodies: tuple[Body, ...]
+    parameters: dict[str, float]
+    gravity: sp.ImmutableMatrix
+    source: str = "<model>"
+    description: str = ""
+
+    def __post_init__(self):
+        object.__setattr__(self, "bodies", tuple(_tree_order(self.bodies, self.source)))
+        object.__setattr__(self, "parameters", dict(self.parameters))
+        _validate(self)
+
+    @property
+    def moving_bodies(self) -> list[Body]:
+        return [b for b in self.bodies if b.joint.moves]
+
+    @property
+    def coordinates(self) -> list[str]:
+        return [b.joint.name for b in self.moving_bodies]
+
+    @property
+    def dof(self) -> int:
+        return len(self.moving_bodies)
+
+    @property
+    def symbols(self) -> dict[str, sp.Symbol]:
+        return {name: sp.Symbol(name) for name in self.parameters}
+
+    def parameter_vector(self) -> np.ndarray:
+        """The default parameters as a fresh array, in `parameters` order."""
+        return np.fromiter(self.parameters.values(), dtype=float, count=len(self.parameters))
+
+    def canonical(self) -> str:
+        """A deterministic text of everything that defines the equations (for hashing)."""
+        lines = [f"name={self.name}", f"gravity={sp.srepr(self.gravity)}"]
+        lines += [f"param {k}={float(v)!r}" for k, v in self.parameters.items()]
+        for b in self.bodies:
+            j = b.joint
+            lines.append(
+                "|".join(
+                    [
+                        b.name, b.parent, j.name, j.type,
+                        sp.srepr(j.origin_xyz), sp.srepr(j.origin_rotation), sp.srepr(j.axis),
+                        sp.srepr(b.mass), sp.srepr(b.com), sp.srepr(b.inertia),
+                    ]
+                )
+            )
+        return "\n".join(lines)
+
+    def content_hash(self) -> str:
+        return hashlib.sha256(self.canonical().encode()).hexdigest()
+
+
+def _tree_order(bodies, source: str) -> list[Body]:
+    """Order bodies parents-first, keeping the given order where it already is one."""
+    seen: set[str] = set()
+    for b in bodies:
+        if b.name in seen:
+            raise ModelError(source, f"body '{b.name}'", "duplicate body name")
+        if b.name == WORLD:
+            raise ModelError(source, f"body '{b.name}'", f"'{WORLD}' is reserved for the fixed frame")
+        seen.add(b.name)
+    for b in bodies:
+        if b.parent != WORLD and b.parent not in seen:
+            raise ModelError(source, f"body '{b.name}'", f"unknown parent '{b.parent}'")
+    placed = {WORLD}
+    ordered: list[Body] = []
+    remaining = list(bodies)
+    while remaining:
+        ready = [b for b in remaining if b.parent in placed]
+        if not ready:
+            cycle = ", ".join(sorted(b.name for b in remaining))
+            raise ModelError(source, f"body '{remaining[0].name}'",
+                             f"cyclic parent chain among bodies {cycle}: a model must be a tree")
+        first = ready[0]
+        ordered.append(first)
+        placed.add(first.name)
+        remaining.remove(first)
+    return ordered
+
+
+def _free_symbol_names(expr) -> set[str]:
+    return {s.name for s in sp.sympify(expr).free_symbols}
+
+
+def _numeric(expr, values: dict[sp.Symbol, float], source: str, element: str) -> float:
+    """The value at the default parameters, which must be a finite real number."""
+    try:
+        value = complex(sp.sympify(expr).xreplace(values).evalf())
+    except (TypeError, ValueError):
+        raise ModelError(source, element, f"cannot evaluate '{expr}' to a number") from None
+    if value.imag != 0:
+        raise ModelError(source, element, f"'{expr}' is not real")
+    if not math.isfinite(value.real):
+        raise ModelError(source, element, f"'{expr}' is not finite at the default parameters")
+    return value.real
+
+
+def _validate(model: Model) -> None:
+    src = model.source
+    params = model.parameters
+    for name, value in params.items():
+        if not name:
+            raise ModelError(src, "parameters", "a parameter needs a non-empty name")
+        try:
+            val = float(value)
+        except (TypeError, ValueError):
+            raise ModelError(src, f"parameter '{name}'", f"default value {value!r} is not a number") from None
+        if not math.isfinite(val):
+            raise ModelError(src, f"parameter '{name}'", f"default value {value!r} is not finite")
+    declared = set(params)
+    values = {sp.Symbol(k): sp.Float(float(v)) for k, v in params.items()}
+
+    def check_symbols(expr, element: str) -> None:
+        unknown = _free_symbol_names(expr) - declared
+        if unknown:
+            raise ModelError(src, element, "undeclared symbol(s) " + ", ".join(sorted(unknown))
+                             + " (declare them under 'parameters')")
+
+    check_symbols(model.gravity, "gravity")
+    for entry in model.gravity:
+        _numeric(entry, values, src, "gravity")
+    coords: dict[str, str] = {}
+    for b in model.bodies:
+        j = b.joint
+        where = f"body '{b.name}'"
+        if j.type not in JOINT_TYPES:
+            raise ModelError(src, f"{where}, joint '{j.name}'",
+                             f"unknown joint type '{j.type}' (expected one of {', '.join(JOINT_TYPES)})")
+        for label, expr in (("origin", j.origin_xyz), ("origin rotation", j.origin_rotation),
+                            ("axis", j.axis), ("mass", b.mass), ("com", b.com),
+                            ("inertia", b.inertia)):
+            check_symbols(expr, f"{where}, {label}")
+        if j.moves:
+            if j.name in coords:
+                raise ModelError(src, f"{where}, joint '{j.name}'",
+                                 f"duplicate coordinate name (also used by body '{coords[j.name]}')")
+            coords[j.name] = b.name
+            axis = np.array([_numeric(a, values, src, f"{where}, axis") for a in j.axis])
+            if not np.linalg.norm(axis) > 1e-12:
+                raise ModelError(src, f"{where}, joint '{j.name}'", "zero joint axis")
+        for label, vec in (("joint origin xyz", j.origin_xyz), ("com", b.com)):
+            for entry in vec:
+                _numeric(entry, values, src, f"{where}, {label}")
+        mass = _numeric(b.mass, values, src, f"{where}, mass")
+        if mass < 0 or not math.isfinite(mass):
+            raise ModelError(src, f"{where}, mass", f"mass must be non-negative, got {mass:g}")
+        inertia = np.array([[_numeric(e, values, src, f"{where}, inertia") for e in row]
+                            for row in b.inertia.tolist()])
+        check_inertia(inertia, src, f"{where}, inertia")
+
+
+def check_inertia(inertia: np.ndarray, source: str, element: str) -> None:
+    """Reject a central inertia tensor that no rigid body can have."""
+    if not np.all(np.isfinite(inertia)):
+        raise ModelError(source, element, "inertia has non-finite entries")
+    if not np.allclose(inertia, inertia.T, rtol=0, atol=1e-12 * max(1.0, np.abs(inertia).max())):
+        raise ModelError(source, element, "inertia tensor is not symmetric")
+    eig = np.linalg.eigvalsh(inertia)
+    scale = max(1e-300, np.abs(eig).max())
+    tol = 1e-9 * scale
+    if eig.min() < -tol:
+        raise ModelError(source, element,
+                         f"inertia tensor is not positive semi-definite (principal moments {eig.tolist()})")
+    a, b, c = eig
+    if a + b < c - tol:
+        raise ModelError(source, element,
+                         f"principal moments {eig.tolist()} break the triangle inequality "
+                         "(each must be at most the sum of the other two)")

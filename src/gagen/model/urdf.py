@@ -1,0 +1,397 @@
+"""Read a URDF robot description into a validated Model (DESIGN.md section 4).
+
+Only what the equations of motion need is read: links' <inertial> and joints' origin, axis,
+limits and mimic. Visuals, collisions, transmissions and gazebo tags are ignored. The root
+link becomes the world, fixed joints are merged away, and every remaining body's mass
+properties become named parameters (defaults from the file) so a payload can be changed
+without regenerating the equations.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, replace
+from pathlib import Path
+from xml.parsers import expat
+from xml.parsers.expat import ExpatError
+
+import numpy as np
+import sympy as sp
+
+from .expressions import MAX_MAGNITUDE
+from .inputs import check_body_count, name_field, quote, read_description
+from .merge import merge_fixed_joints, symmetric
+from .model import (
+    JOINT_TYPES,
+    WORLD,
+    ZERO3,
+    Body,
+    Joint,
+    Limits,
+    Model,
+    ModelError,
+    check_inertia,
+    rotation_from_rpy,
+    vector,
+)
+
+GRAVITY = 9.81
+_UNSUPPORTED = ("floating", "planar")
+_INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+# Parameter suffix -> (row, column) of the inertia tensor, in the order they are declared.
+_INERTIA_PARAMS = (("Ixx", 0, 0), ("Iyy", 1, 1), ("Izz", 2, 2),
+                   ("Ixy", 0, 1), ("Ixz", 0, 2), ("Iyz", 1, 2))
+
+
+@dataclass(frozen=True)
+class _Link:
+    name: str
+    mass: sp.Expr
+    com: sp.ImmutableMatrix
+    inertia: sp.ImmutableMatrix
+
+
+@dataclass(frozen=True)
+class _UrdfJoint:
+    parent: str
+    child: str
+    joint: Joint
+
+
+def load_urdf(path: str | Path) -> Model:
+    """Read a URDF file; errors are ModelError naming the file, the element and the reason."""
+    return parse_urdf_text(read_description(path, "URDF file"), str(path))
+
+
+def parse_urdf_text(text: str | bytes, source: str = "<urdf>") -> Model:
+    """Build the Model of a URDF document given as text or bytes; source names it in errors.
+
+    Bytes are decoded as their XML declaration says (UTF-8 when there is none).
+    """
+    robot = _parse_xml(text, source)
+    links = _parse_links(robot, source)
+    joints = _parse_joints(robot, links, source)
+    root, ordered = _tree_order(links, joints, source)
+    if not any(j.joint.moves for j in ordered):
+        raise ModelError(source, f"robot {quote(_robot_name(robot, source))}",
+                         "no revolute, continuous or prismatic joint: nothing can move")
+    bodies = tuple(_body(j, links[j.child], root) for j in ordered)
+    g = sp.Symbol("g")
+    model = Model(name=_robot_name(robot, source), bodies=bodies,
+                  parameters={"g": GRAVITY}, gravity=vector([0, 0, -g]), source=source)
+    return _parameterize(merge_fixed_joints(model))
+
+
+# --- XML structure --------------------------------------------------------------------------
+
+def _parse_xml(text: str | bytes, source: str) -> ET.Element:
+    try:
+        root = _tree_from_expat(text)
+    except ExpatError as exc:
+        raise ModelError(source, f"line {exc.lineno}, column {exc.offset + 1}",
+                         f"malformed XML: {expat.ErrorString(exc.code)}") from None
+    except _DoctypeRefused:
+        raise ModelError(source, "<!DOCTYPE>", "a URDF must not declare a DTD or entities") from None
+    except (LookupError, ValueError, RecursionError, MemoryError) as exc:
+        raise ModelError(source, "", f"unreadable XML: {type(exc).__name__}") from None
+    if root.tag != "robot":
+        raise ModelError(source, f"<{quote(str(root.tag))[1:-1]}>",
+                         "the root element of a URDF must be <robot>")
+    return root
+
+
+class _DoctypeRefused(Exception):
+    pass
+
+
+def _refuse_doctype(*_args) -> None:
+    raise _DoctypeRefused
+
+
+def _tree_from_expat(text: str | bytes) -> ET.Element:
+    """An ElementTree from expat, refusing any DTD.
+
+    A URDF never needs one, and refusing it refuses entity expansion ("billion laughs")
+    and external entities whatever expat's own protections are. ElementTree's C parser
+    does not expose these handlers, so the tree is built here from expat's events.
+    """
+    parser = expat.ParserCreate()
+    builder = ET.TreeBuilder()
+    parser.StartDoctypeDeclHandler = _refuse_doctype
+    parser.EntityDeclHandler = _refuse_doctype
+    parser.ExternalEntityRefHandler = _refuse_doctype
+    parser.buffer_text = True
+    parser.ordered_attributes = False
+    parser.StartElementHandler = builder.start
+    parser.EndElementHandler = builder.end
+    parser.CharacterDataHandler = builder.data
+    parser.Parse(text, True)
+    return builder.close()
+
+
+def _robot_name(robot: ET.Element, source: str) -> str:
+    return name_field(robot.get("name") or Path(source).stem, source, "<robot> name")
+
+
+def _name_attr(elem: ET.Element, key: str, source: str, element: str) -> str:
+    """An attribute that names something: present, non-empty and of bounded length."""
+    return name_field(_attr(elem, key, source, element), source, f"{element} {key}")
+
+
+def _attr(elem: ET.Element, key: str, source: str, element: str) -> str:
+    value = elem.get(key)
+    if value is None or not value.strip():
+        raise ModelError(source, element, f"missing attribute '{key}' of <{elem.tag}>")
+    return value.strip()
+
+
+def _child(elem: ET.Element, tag: str, source: str, element: str) -> ET.Element:
+    found = elem.find(tag)
+    if found is None:
+        raise ModelError(source, element, f"missing <{tag}>")
+    return found
+
+
+def _number(text: str, source: str, element: str) -> sp.Expr:
+    """A finite number; exact integers stay exact, the rest become sympy Floats."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise ModelError(source, element, f"{quote(text)} is not a number") from None
+    if not math.isfinite(value) or abs(value) > MAX_MAGNITUDE:
+        raise ModelError(source, element, f"{quote(text)} is not a finite number of at most "
+                         f"{MAX_MAGNITUDE:g} in magnitude")
+    if value.is_integer() and abs(value) < 2**53:
+        return sp.Integer(int(value))
+    return sp.Float(value)
+
+
+def _numbers(text: str, count: int, source: str, element: str) -> list[sp.Expr]:
+    parts = text.split()
+    if len(parts) != count:
+        raise ModelError(source, element,
+                         f"expected {count} numbers separated by spaces, got {quote(text)}")
+    return [_number(p, source, element) for p in parts]
+
+
+def _origin(parent: ET.Element, source: str, element: str) -> tuple[list, list]:
+    """xyz and rpy of an optional <origin> (both default to zeros, as in URDF)."""
+    origin = parent.find("origin")
+    if origin is None:
+        return [0, 0, 0], [0, 0, 0]
+    xyz = _numbers(origin.get("xyz", "0 0 0"), 3, source, f"{element}, origin xyz")
+    rpy = _numbers(origin.get("rpy", "0 0 0"), 3, source, f"{element}, origin rpy")
+    return xyz, rpy
+
+
+# --- links ----------------------------------------------------------------------------------
+
+def _parse_links(robot: ET.Element, source: str) -> dict[str, _Link]:
+    links: dict[str, _Link] = {}
+    elements = robot.findall("link")
+    check_body_count(len(elements), source, "<robot>")
+    for k, elem in enumerate(elements):
+        name = _name_attr(elem, "name", source, f"link #{k + 1}")
+        if name in links:
+            raise ModelError(source, f"link {quote(name)}", "duplicate link name")
+        links[name] = _parse_link(elem, name, source)
+    if not links:
+        raise ModelError(source, "<robot>", "no <link> elements")
+    return links
+
+
+def _parse_link(elem: ET.Element, name: str, source: str) -> _Link:
+    where = f"link {quote(name)}, inertial"
+    inertial = elem.find("inertial")
+    if inertial is None:  # URDF: a link without <inertial> has no mass
+        return _Link(name, sp.Integer(0), ZERO3, sp.ImmutableMatrix(sp.zeros(3, 3)))
+    xyz, rpy = _origin(inertial, source, where)
+    mass_elem = _child(inertial, "mass", source, where)
+    mass = _number(_attr(mass_elem, "value", source, f"{where} mass"), source, f"{where} mass")
+    if mass < 0:
+        raise ModelError(source, f"{where} mass", f"mass must be non-negative, got {float(mass):g}")
+    inertia_elem = _child(inertial, "inertia", source, where)
+    values = {key: _number(_attr(inertia_elem, key, source, f"{where} inertia"), source,
+                           f"{where} inertia {key}") for key in _INERTIA_KEYS}
+    tensor = sp.Matrix([[values["ixx"], values["ixy"], values["ixz"]],
+                        [values["ixy"], values["iyy"], values["iyz"]],
+                        [values["ixz"], values["iyz"], values["izz"]]])
+    check_inertia(np.array(tensor.tolist(), dtype=float), source, f"{where} inertia")
+    # URDF gives the inertia in the inertial frame; gagen wants it along the body's axes.
+    if any(a != 0 for a in rpy):
+        rot = rotation_from_rpy(*rpy)
+        tensor = symmetric(rot * tensor * rot.T)
+    return _Link(name, mass, vector(xyz), sp.ImmutableMatrix(tensor))
+
+
+# --- joints ---------------------------------------------------------------------------------
+
+def _parse_joints(robot: ET.Element, links: dict[str, _Link], source: str) -> list[_UrdfJoint]:
+    joints: list[_UrdfJoint] = []
+    names: set[str] = set()
+    for k, elem in enumerate(robot.findall("joint")):
+        joint = _parse_joint(elem, k, links, source)
+        if joint.joint.name in names:
+            raise ModelError(source, f"joint {quote(joint.joint.name)}", "duplicate joint name")
+        names.add(joint.joint.name)
+        joints.append(joint)
+    for j in joints:
+        if j.joint.mimic is not None and j.joint.mimic not in names:
+            raise ModelError(source, f"joint {quote(j.joint.name)}, mimic",
+                             f"mimics unknown joint {quote(j.joint.mimic)}")
+    return joints
+
+
+def _parse_joint(elem: ET.Element, k: int, links: dict[str, _Link], source: str) -> _UrdfJoint:
+    name = _name_attr(elem, "name", source, f"joint #{k + 1}")
+    where = f"joint {quote(name)}"
+    jtype = _attr(elem, "type", source, where)
+    if jtype in _UNSUPPORTED:
+        raise ModelError(source, where, f"joint type {quote(jtype)} is unsupported "
+                         f"(gagen supports {', '.join(JOINT_TYPES)})")
+    if jtype not in JOINT_TYPES:
+        raise ModelError(source, where, f"unknown joint type {quote(jtype)} "
+                         f"(gagen supports {', '.join(JOINT_TYPES)})")
+    parent = _link_ref(elem, "parent", links, source, where)
+    child = _link_ref(elem, "child", links, source, where)
+    xyz, rpy = _origin(elem, source, where)
+    joint = Joint(name=name, type=jtype, origin_xyz=vector(xyz),
+                  origin_rotation=rotation_from_rpy(*rpy), axis=_axis(elem, jtype, source, where),
+                  limits=_limits(elem, source, where), mimic=_mimic(elem, source, where))
+    return _UrdfJoint(parent, child, joint)
+
+
+def _link_ref(elem: ET.Element, tag: str, links: dict[str, _Link], source: str,
+              where: str) -> str:
+    link = _name_attr(_child(elem, tag, source, where), "link", source, f"{where}, <{tag}>")
+    if link not in links:
+        raise ModelError(source, f"{where}, <{tag}>", f"unknown link {quote(link)}")
+    return link
+
+
+def _axis(elem: ET.Element, jtype: str, source: str, where: str) -> sp.ImmutableMatrix:
+    axis_elem = elem.find("axis")
+    text = axis_elem.get("xyz", "1 0 0") if axis_elem is not None else "1 0 0"
+    axis = _numbers(text, 3, source, f"{where}, axis")
+    if jtype == "fixed":
+        return vector(axis)
+    norm = math.sqrt(sum(float(a) ** 2 for a in axis))
+    if norm < 1e-12:
+        raise ModelError(source, f"{where}, axis", "zero joint axis")
+    # URDF parsers normalise the axis, so the coordinate is an angle or a distance.
+    if abs(norm - 1.0) > 1e-12:
+        axis = [sp.Float(float(a) / norm) if a != 0 else sp.Integer(0) for a in axis]
+    return vector(axis)
+
+
+def _limits(elem: ET.Element, source: str, where: str) -> Limits | None:
+    limit = elem.find("limit")
+    if limit is None:
+        return None
+    values = {}
+    for key in ("lower", "upper", "effort", "velocity"):
+        text = limit.get(key)
+        values[key] = None if text is None else float(_number(text, source, f"{where}, limit {key}"))
+    return Limits(**values)
+
+
+def _mimic(elem: ET.Element, source: str, where: str) -> str | None:
+    mimic = elem.find("mimic")
+    if mimic is None:
+        return None
+    return _name_attr(mimic, "joint", source, f"{where}, mimic")
+
+
+def _names(names: list[str], shown: int = 5) -> str:
+    listed = ", ".join(quote(n) for n in names[:shown])
+    return listed + (f" and {len(names) - shown} more" if len(names) > shown else "")
+
+
+# --- tree -----------------------------------------------------------------------------------
+
+def _tree_order(links: dict[str, _Link], joints: list[_UrdfJoint],
+                source: str) -> tuple[str, list[_UrdfJoint]]:
+    """The root link and the joints depth-first from it, children in document order."""
+    parent_joint: dict[str, _UrdfJoint] = {}
+    children: dict[str, list[_UrdfJoint]] = {name: [] for name in links}
+    for j in joints:
+        if j.child in parent_joint:
+            raise ModelError(source, f"link {quote(j.child)}",
+                             f"child of both joint {quote(parent_joint[j.child].joint.name)} and joint "
+                             f"{quote(j.joint.name)}: a URDF must be a tree (no loops)")
+        parent_joint[j.child] = j
+        children[j.parent].append(j)
+    roots = [name for name in links if name not in parent_joint]
+    if len(roots) > 1:
+        raise ModelError(source, "<robot>", f"several root links ({_names(roots)}): "
+                         "every link but one must be the child of a joint")
+    if not roots:
+        raise ModelError(source, "<robot>", "no root link: the joints form a cycle")
+    root = roots[0]
+    ordered: list[_UrdfJoint] = []
+    stack = list(reversed(children[root]))
+    while stack:
+        j = stack.pop()
+        ordered.append(j)
+        stack.extend(reversed(children[j.child]))
+    reached = {root} | {j.child for j in ordered}
+    unreached = [name for name in links if name not in reached]
+    if unreached:
+        raise ModelError(source, f"link {quote(unreached[0])}",
+                         f"links {_names(unreached)} form a cycle (not reachable from the "
+                         f"root link {quote(root)})")
+    for name in links:
+        if name == WORLD and name != root:
+            raise ModelError(source, f"link {quote(name)}",
+                             f"'{WORLD}' is reserved for the root link (the fixed frame)")
+    return root, ordered
+
+
+def _body(j: _UrdfJoint, link: _Link, root: str) -> Body:
+    # The root link is welded to the world, so the world takes its place.
+    parent = WORLD if j.parent == root else j.parent
+    return Body(name=link.name, parent=parent, joint=j.joint, mass=link.mass, com=link.com,
+                inertia=link.inertia)
+
+
+# --- parameters -----------------------------------------------------------------------------
+
+def _parameterize(model: Model) -> Model:
+    """Turn each massive body's mass, mass centre and inertia into named parameters."""
+    parameters = dict(model.parameters)
+    bodies = []
+    for body in model.bodies:
+        if _is_zero(body.mass) and all(_is_zero(e) for e in body.inertia):
+            bodies.append(body)  # massless: nothing to tune, keep plain zeros
+            continue
+        values = _body_parameters(body)
+        parameters.update(values)
+        bodies.append(_symbolic_body(body))
+    return Model(name=model.name, bodies=tuple(bodies), parameters=parameters,
+                 gravity=model.gravity, source=model.source, description=model.description)
+
+
+def _symbolic_body(body: Body) -> Body:
+    link = body.name
+    inertia = sp.ImmutableMatrix(3, 3, lambda r, c: sp.Symbol(_inertia_name(r, c, link)))
+    return replace(body, mass=sp.Symbol(f"m_{link}"),
+                   com=vector([sp.Symbol(f"c{a}_{link}") for a in "xyz"]), inertia=inertia)
+
+
+def _body_parameters(body: Body) -> dict[str, float]:
+    link = body.name
+    values = {f"m_{link}": float(body.mass)}
+    values.update({f"c{a}_{link}": float(body.com[i]) for i, a in enumerate("xyz")})
+    values.update({f"{key}_{link}": float(body.inertia[r, c]) for key, r, c in _INERTIA_PARAMS})
+    return values
+
+
+def _inertia_name(r: int, c: int, link: str) -> str:
+    r, c = min(r, c), max(r, c)
+    key = next(k for k, kr, kc in _INERTIA_PARAMS if (kr, kc) == (r, c))
+    return f"{key}_{link}"
+
+
+def _is_zero(expr) -> bool:
+    return sp.sympify(expr).is_zero is True

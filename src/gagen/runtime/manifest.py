@@ -1,0 +1,81 @@
+"""What the runtime knows of a model without SymPy: names, joints, parameters.
+
+A compiled module carries its manifest as hex-encoded JSON (`MANIFEST_HEX`): hex digits
+are the only text of the model that reaches generated code, so no name from a description
+can end a string or a comment there. Loading a cached model reads the manifest instead of
+the model file, and SymPy is never imported.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class JointInfo:
+    """A moving joint: its coordinate's name, type and limits (None where not given)."""
+
+    name: str
+    type: str
+    lower: float | None = None
+    upper: float | None = None
+    effort: float | None = None
+    velocity: float | None = None
+
+
+@dataclass(frozen=True)
+class ModelInfo:
+    """The numbers and names of a model that the runtime needs (no symbolic content)."""
+
+    name: str
+    joints: tuple[JointInfo, ...]
+    parameters: tuple[tuple[str, float], ...]
+    source: str = ""
+
+    @property
+    def coordinates(self) -> list[str]:
+        return [joint.name for joint in self.joints]
+
+    @property
+    def dof(self) -> int:
+        return len(self.joints)
+
+    @property
+    def parameter_defaults(self) -> dict[str, float]:
+        return dict(self.parameters)
+
+    def parameter_vector(self) -> np.ndarray:
+        """The default parameters in declaration order."""
+        return np.array([value for _, value in self.parameters], dtype=float)
+
+    def to_hex(self) -> str:
+        """The manifest as hex digits of UTF-8 JSON, safe to print into any source file."""
+        data = {"name": self.name, "source": self.source,
+                "joints": [asdict(joint) for joint in self.joints],
+                "parameters": [list(item) for item in self.parameters]}
+        return json.dumps(data, sort_keys=True, ensure_ascii=False).encode().hex()
+
+    @classmethod
+    def from_hex(cls, text: str) -> ModelInfo:
+        data = json.loads(bytes.fromhex(text).decode())
+        return cls(name=data["name"], source=data["source"],
+                   joints=tuple(JointInfo(**joint) for joint in data["joints"]),
+                   parameters=tuple((name, float(value)) for name, value in data["parameters"]))
+
+    @classmethod
+    def from_model(cls, model) -> ModelInfo:
+        """The manifest of a `gagen.model.Model` (duck-typed: no import of the model stage)."""
+        joints = []
+        for body in model.moving_bodies:
+            limits = body.joint.limits
+            values = {} if limits is None else {key: getattr(limits, key) for key in
+                                                ("lower", "upper", "effort", "velocity")}
+            joints.append(JointInfo(body.joint.name, body.joint.type,
+                                    **{k: None if v is None else float(v)
+                                       for k, v in values.items()}))
+        return cls(name=model.name, joints=tuple(joints), source=str(model.source or ""),
+                   parameters=tuple((name, float(value))
+                                    for name, value in model.parameters.items()))

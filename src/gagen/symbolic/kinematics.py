@@ -1,0 +1,184 @@
+"""Symbolic kinematics of a tree of bodies (the paper's section 2.1, eqs. 1-4).
+
+Every vector of body i is expressed in body i's own frame, built from its parent's by
+one joint rotation. Working body by body, instead of multiplying world rotation
+matrices, keeps each expression the size of one joint; each component is then named
+by an intermediate symbol, so nothing grows with the depth of the tree.
+
+For body i with origin O_i and mass centre C_i, in frame i:
+- angular velocity w = sum_r Jw[r] qd_r and angular acceleration alpha = sum_r Jw[r] qdd_r + alpha0;
+- velocity of C_i: v_C = sum_r JvC[r] qd_r, acceleration a_C = sum_r JvC[r] qdd_r + aC0.
+Jw[r] = d w / d qd_r and JvC[r] = d v_C / d qd_r are the partial angular velocities and
+partial velocities of eqs. 7-10; alpha0 and aC0 are the parts of eq. 4 free of qdd.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import sympy as sp
+
+from ..model.model import Body, Model
+from .symbols import Acceleration, Coordinate, Internal, Rate, Torque
+
+Vec = sp.Matrix
+
+
+class Recorder:
+    """Names non-trivial subexpressions with intermediate symbols, in order of definition."""
+
+    def __init__(self, prefix: str = "_g"):
+        self.prefix = prefix
+        self.definitions: list[tuple[Internal, sp.Expr]] = []
+        self._by_expr: dict[sp.Expr, Internal] = {}
+
+    def name(self, expr) -> sp.Expr:
+        expr = sp.sympify(expr)
+        if _is_trivial(expr):
+            return expr
+        symbol = self._by_expr.get(expr)
+        if symbol is None:
+            symbol = Internal(f"{self.prefix}{len(self.definitions)}")
+            self.definitions.append((symbol, expr))
+            self._by_expr[expr] = symbol
+        return symbol
+
+    def vec(self, v) -> Vec:
+        return Vec([self.name(e) for e in v])
+
+
+def _is_trivial(expr: sp.Expr) -> bool:
+    if expr.is_Atom:
+        return True
+    # -x and 2*x are as cheap inline as through a name
+    return expr.is_Mul and len(expr.args) == 2 and expr.args[0].is_Number and expr.args[1].is_Atom
+
+
+@dataclass
+class CoordinateSymbols:
+    """The symbols of q, qd, qdd and tau; each kind is a class of its own (gagen.symbols),
+    so none can equal a parameter or another kind whatever the joints are called."""
+
+    q: list[Coordinate]
+    qd: list[Rate]
+    qdd: list[Acceleration]
+    tau: list[Torque]
+
+    @classmethod
+    def for_model(cls, model: Model) -> CoordinateSymbols:
+        names = model.coordinates
+        return cls(
+            q=[Coordinate(n) for n in names],
+            qd=[Rate(f"{n}_d") for n in names],
+            qdd=[Acceleration(f"{n}_dd") for n in names],
+            tau=[Torque(f"tau_{n}") for n in names],
+        )
+
+
+@dataclass
+class BodyKinematics:
+    """Kinematic quantities of one body, in its own frame (see module docstring)."""
+
+    body: Body
+    Jw: dict[int, Vec] = field(default_factory=dict)
+    Jv: dict[int, Vec] = field(default_factory=dict)  # of the origin O_i
+    w: Vec = field(default_factory=lambda: sp.zeros(3, 1))
+    alpha0: Vec = field(default_factory=lambda: sp.zeros(3, 1))
+    a0: Vec = field(default_factory=lambda: sp.zeros(3, 1))  # of the origin O_i
+    gravity: Vec = field(default_factory=lambda: sp.zeros(3, 1))
+    position: Vec = field(default_factory=lambda: sp.zeros(3, 1))  # of O_i, world origin at 0
+    JvC: dict[int, Vec] = field(default_factory=dict)
+    aC0: Vec = field(default_factory=lambda: sp.zeros(3, 1))
+
+    def alpha(self, qdd: list[sp.Symbol]) -> Vec:
+        return _linear_form(self.Jw, qdd, self.alpha0)
+
+    def a_C(self, qdd: list[sp.Symbol]) -> Vec:
+        return _linear_form(self.JvC, qdd, self.aC0)
+
+    def v_C(self, qd: list[sp.Symbol]) -> Vec:
+        return _linear_form(self.JvC, qd, sp.zeros(3, 1))
+
+
+def _linear_form(columns: dict[int, Vec], rates: list[sp.Symbol], constant: Vec) -> Vec:
+    out = sp.Matrix(constant)
+    for r, col in columns.items():
+        out += col * rates[r]
+    return out
+
+
+def unit_axis(axis) -> Vec:
+    axis = sp.Matrix(axis)
+    norm2 = sp.expand(sum(a * a for a in axis))
+    if norm2 == 1:
+        return axis
+    if norm2.is_Number:
+        return axis / sp.Float(float(sp.sqrt(norm2)))
+    return axis / sp.sqrt(norm2)
+
+
+def axis_rotation(axis: Vec, c: sp.Expr, s: sp.Expr) -> sp.Matrix:
+    """Rodrigues' rotation about a unit axis, given cos and sin of the angle."""
+    ax, ay, az = axis
+    K = sp.Matrix([[0, -az, ay], [az, 0, -ax], [-ay, ax, 0]])
+    R = c * sp.eye(3) + s * K + (1 - c) * (axis * axis.T)
+    return R.applyfunc(sp.expand)
+
+
+def derive_kinematics(model: Model, coords: CoordinateSymbols, rec: Recorder) -> list[BodyKinematics]:
+    index = {b.joint.name: k for k, b in enumerate(model.moving_bodies)}
+    world = BodyKinematics(body=None, gravity=sp.Matrix(model.gravity))
+    frames: dict[str, BodyKinematics] = {"world": world}
+    out = []
+    for body in model.bodies:
+        parent = frames[body.parent]
+        k = index.get(body.joint.name) if body.joint.moves else None
+        kin = _child_kinematics(body, parent, k, coords, rec)
+        frames[body.name] = kin
+        out.append(kin)
+    return out
+
+
+def _child_kinematics(body: Body, parent: BodyKinematics, k: int | None,
+                      coords: CoordinateSymbols, rec: Recorder) -> BodyKinematics:
+    joint = body.joint
+    axis = unit_axis(joint.axis)
+    R = sp.Matrix(joint.origin_rotation)
+    d = sp.Matrix(joint.origin_xyz)
+    if joint.rotates:
+        c, s = rec.name(sp.cos(coords.q[k])), rec.name(sp.sin(coords.q[k]))
+        R = (R * axis_rotation(axis, c, s)).applyfunc(sp.expand)
+    elif joint.type == "prismatic":
+        d = d + sp.Matrix(joint.origin_rotation) * axis * coords.q[k]
+    RT = R.T
+
+    def to_child(v: Vec) -> Vec:
+        return rec.vec(RT * v)
+
+    kin = BodyKinematics(body=body)
+    for r, jw in parent.Jw.items():
+        kin.Jw[r] = to_child(jw)
+    zero = sp.zeros(3, 1)
+    for r in sorted(set(parent.Jv) | set(parent.Jw)):
+        kin.Jv[r] = to_child(parent.Jv.get(r, zero) + parent.Jw.get(r, zero).cross(d))
+    w_in = to_child(parent.w)  # parent's angular velocity, in this frame
+    kin.alpha0 = to_child(parent.alpha0)
+    kin.a0 = to_child(parent.a0 + parent.alpha0.cross(d) + parent.w.cross(parent.w.cross(d)))
+    kin.gravity = to_child(parent.gravity)
+    kin.position = to_child(parent.position + d)
+    kin.w = w_in
+    if joint.rotates:
+        kin.Jw[k] = axis
+        relative = axis * coords.qd[k]
+        kin.w = rec.vec(w_in + relative)
+        kin.alpha0 = rec.vec(kin.alpha0 + w_in.cross(relative))
+    elif joint.type == "prismatic":
+        kin.Jv[k] = axis
+        kin.a0 = rec.vec(kin.a0 + 2 * w_in.cross(axis * coords.qd[k]))
+    c_vec = sp.Matrix(body.com)
+    for r in sorted(set(kin.Jv) | set(kin.Jw)):
+        jv = kin.Jv.get(r, sp.zeros(3, 1))
+        jw = kin.Jw.get(r, sp.zeros(3, 1))
+        kin.JvC[r] = rec.vec(jv + jw.cross(c_vec))
+    kin.aC0 = rec.vec(kin.a0 + kin.alpha0.cross(c_vec) + kin.w.cross(kin.w.cross(c_vec)))
+    return kin
