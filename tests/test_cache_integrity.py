@@ -16,7 +16,7 @@ import warnings
 import pytest
 
 import gagen
-from gagen.build import builder
+from gagen.build import builder, cache
 from gagen.build.builder import (
     CacheWarning,
     cached_module_is_intact,
@@ -84,10 +84,10 @@ def test_a_truncated_module_is_rebuilt_with_a_warning_not_a_crash(built_entry):
     assert repaired.returncode == 0, repaired.stderr
     value, caught = repaired.stdout.splitlines()
     assert value == expected.stdout.splitlines()[0]
-    assert "CacheWarning" in caught and "corrupt or incomplete" in caught
+    assert "CacheWarning" in caught and "corrupt or incomplete" in caught, repaired
     assert cached_module_is_intact(path.parent, path.name)
     again = load_in_a_fresh_process(cache)
-    assert again.stdout.splitlines()[1:] in ([], [""])
+    assert again.stdout.splitlines()[1:] in ([], [""]), again
 
 
 def litter(cache, name: str, owner: str | None, age: float = 0.0):
@@ -119,13 +119,13 @@ def test_builds_killed_midway_are_cleaned_up_later(tmp_path):
 @pytest.mark.parametrize("kind", ["a file", "read-only", "under a file"])
 def test_an_unwritable_cache_falls_back_to_a_private_folder(tmp_path, monkeypatch, kind):
     if kind == "read-only" and os.geteuid() == 0:
-        monkeypatch.setattr(builder.tempfile, "mkdtemp", _refuse_in(tmp_path / "ro"))
+        monkeypatch.setattr(cache.tempfile, "mkdtemp", _refuse_in(tmp_path / "ro"))
     target = {"a file": tmp_path / "cachefile", "read-only": tmp_path / "ro",
               "under a file": tmp_path / "cachefile" / "sub"}[kind]
     (tmp_path / "cachefile").write_text("not a folder")
     (tmp_path / "ro").mkdir()
     (tmp_path / "ro").chmod(0o500)
-    monkeypatch.setattr(builder, "_fallback_cache", None)
+    monkeypatch.setattr(cache, "_fallback_cache", None)
     with pytest.warns(CacheWarning, match="cannot write the cache folder"):
         fallback = usable_cache_dir(target)
     assert fallback != target and fallback.is_dir() and os.access(fallback, os.W_OK)
@@ -133,7 +133,7 @@ def test_an_unwritable_cache_falls_back_to_a_private_folder(tmp_path, monkeypatc
 
 
 def _refuse_in(folder):
-    real = builder.tempfile.mkdtemp
+    real = cache.tempfile.mkdtemp
 
     def mkdtemp(*args, dir=None, **kwargs):
         if dir is not None and str(dir).startswith(str(folder)):

@@ -233,7 +233,7 @@ def test_concurrent_builds_of_one_model_both_succeed(tmp_path):
     outputs = [p.communicate(timeout=600) for p in procs]
     assert [p.returncode for p in procs] == [0, 0], outputs
     assert outputs[0][0] == outputs[1][0]
-    entries = [p for p in tmp_path.iterdir() if not p.name.startswith(".")]
+    entries = [p for p in tmp_path.iterdir() if not p.name.startswith(".") and p.name != "index"]
     assert len(entries) == 1
     leftovers = [p for p in tmp_path.iterdir() if p.name.startswith(".")]
     assert leftovers == []
@@ -287,3 +287,17 @@ def test_small_models_inline_their_stages_and_large_ones_call_them():
         ops = int(re.search(r"The two stages have (\d+) operations", text).group(1))
         assert (ops <= INLINE_STAGE_OPS) == inline, (name, ops)
         assert ("always_inline" in text) == inline, name
+
+
+def test_the_codegen_config_chooses_libm_trig_and_inlining():
+    from gagen.codegen.config import CodegenConfig
+    from gagen.codegen.render import generate
+
+    eqs = gagen.derive(gagen.resolve_model("rrr"))
+    fast = generate(eqs, "gagen_rrr_x", "k").files
+    plain = generate(eqs, "gagen_rrr_x", "k", CodegenConfig(fast_trig=False,
+                                                            inline_stage_ops=0)).files
+    assert "gagen_sincos" in fast["rhs.c"] and "gagen_sincos" not in plain["rhs.c"]
+    assert " = sin(q[" in plain["rhs.c"]
+    assert "always_inline" in fast["simulation.c"]
+    assert "always_inline" not in plain["simulation.c"]

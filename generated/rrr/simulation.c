@@ -96,10 +96,11 @@ int gagen_so_position(const double *restrict q, const double *restrict p, double
     S[20] = t76;
     S[21] = t79;
     S[22] = t81;
-    /* M = L D L^T, unrolled, skipping M's structural zeros. M's lower triangle is overwritten
-       with U = L D (not L): then every update is (U*U)*Dinv, whose product of U's is ready
-       before the pivot's reciprocal, which keeps the dependency chains short. A pivot that
-       is not clearly positive means M is not positive definite. */
+    /* M = L D L^T, unrolled, skipping M's structural zeros (codegen/ldlt.py). M's lower
+       triangle is overwritten with U = L D (not L): then every update is (U*U)*Dinv, whose
+       product of U's is ready before the pivot's reciprocal, which keeps the dependency
+       chains short. A pivot that is not clearly positive means M is not positive definite;
+       one that is NaN or inf means the state was not finite. */
     double D[3];
     D[0] = M[0];
     if (!(D[0] > 1e-13 * M[0]) || !(M[0] > 0.0))

@@ -149,16 +149,16 @@ def compiled(model, cache_dir: Path, verbose: bool = False):
     Returns (dyn, report, {"build_s", "load_s"}). Unlike `gagen.load`, never picks a
     module shipped with the package: the module timed is the one just built.
     """
-    from ..build.builder import build, dynamics_class, import_extension
+    from ..build.builder import build, import_extension
+    from ..runtime.compiled import CompiledDynamics
 
     start = time.perf_counter()
     path, report = build(model, cache_dir=cache_dir, verbose=verbose)
     build_s = time.perf_counter() - start
     start = time.perf_counter()
     module = import_extension(path, report.module_name)
-    dyn = dynamics_class(module)()
-    dyn.model = model
-    dyn.module = module
+    dyn = CompiledDynamics(module, model)
+    dyn.__dict__["_model"] = model
     return dyn, report, {"build_s": build_s, "load_s": time.perf_counter() - start}
 
 

@@ -1,4 +1,4 @@
-"""Derive, generate and compile a model into an extension module, with an on-disk cache.
+"""Derive, generate and compile a model into an extension module, kept in the cache.
 
 A build happens in a private temporary folder next to its cache entry and is renamed
 into place only when complete, so an interrupted build or two processes building the
@@ -8,7 +8,6 @@ same model never leave a half-written module that a later `load` would pick up.
 from __future__ import annotations
 
 import contextlib
-import functools
 import hashlib
 import importlib
 import importlib.util
@@ -23,21 +22,32 @@ import tempfile
 import time
 import warnings
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 
 from .. import __version__
 from ..codegen.render import MODEL_C_FILES, c_identifier, generate, write_sources
 from ..errors import BuildError, CompilerNotFoundError
 from ..model.model import Model
-from ..runtime.dynamics import DynamicsInfo
+from ..runtime.compiled import CompiledDynamics
 from ..symbolic.gibbs_appell import derive
-
-DEFAULT_FLAGS = ("-O3",)
-FAST_MATH_FLAGS = ("-ffast-math",)
-# One version of the kernels for any CPU of the architecture: no FMA clone (gagen_math.h)
-PORTABLE_FLAGS = ("-DGAGEN_KERNEL=",)
-_loaded_modules: dict[str, object] = {}
+from .cache import (  # noqa: F401 (re-exported: the cache's API was here)
+    _CHECKSUM_FILE,
+    _OWNER_FILE,
+    CacheWarning,
+    _checksum,
+    build_key,
+    cached_module_is_intact,
+    clean_abandoned_builds,
+    compile_flags,
+    default_cache_dir,
+    discard_cache_entry,
+    generator_digest,
+    import_extension,
+    index_lookup,
+    index_record,
+    input_key,
+    usable_cache_dir,
+)
 
 
 @dataclass
@@ -53,33 +63,6 @@ class BuildReport:
     cached: bool = False
 
 
-# The sub-packages whose code (and templates) decides what the generated sources say.
-GENERATOR_PACKAGES = ("symbolic", "codegen")
-
-
-def generator_digest() -> str:
-    """A hash of the generator's own code and templates, so that a changed generator never
-    reuses a build: every file of the symbolic and codegen stages, in a fixed order."""
-    h = hashlib.sha256()
-    for package in GENERATOR_PACKAGES:
-        root = resources.files(f"gagen.{package}")
-        for path in sorted(_files(root), key=lambda item: item[0]):
-            h.update(path[0].encode())
-            h.update(path[1].read_bytes())
-    return h.hexdigest()
-
-
-def _files(folder, prefix: str = ""):
-    """(relative name, traversable) of every source and template file under a folder."""
-    for item in folder.iterdir():
-        name = f"{prefix}{item.name}"
-        if item.is_dir():
-            if item.name != "__pycache__":
-                yield from _files(item, name + "/")
-        elif item.name.endswith((".py", ".j2", ".h", ".c")):
-            yield name, item
-
-
 def source_key(model: Model) -> str:
     """Hash of what the generated sources depend on: model, parameter names, generator, templates."""
     h = hashlib.sha256()
@@ -89,51 +72,20 @@ def source_key(model: Model) -> str:
     return h.hexdigest()
 
 
-def module_name_for(model: Model, key: str) -> str:
-    return f"gagen_{c_identifier(model.name)}_{key[:12]}"
+def module_name_for(model: Model, key: str | None = None) -> str:
+    """The module's name: the model's identifier and a hash of the model alone (not of the
+    generator), so the shipped golden sources keep their names when the generator's code
+    changes. `key` is ignored (earlier versions took the source key)."""
+    return f"gagen_{c_identifier(model.name)}_{model_key(model)[:12]}"
 
 
-def compile_flags(fast_math: bool = False, portable: bool = False) -> list[str]:
-    """The compiler flags: -O3, plus -ffast-math on request, plus no per-CPU kernel clones
-    with `portable` (for a module copied to other machines, and to test that version)."""
-    return (list(DEFAULT_FLAGS) + (list(FAST_MATH_FLAGS) if fast_math else [])
-            + (list(PORTABLE_FLAGS) if portable else []))
-
-
-def build_key(src_key: str, flags: list[str]) -> str:
-    """Hash of the sources plus what the binary depends on: flags, Python ABI, NumPy, Cython."""
-    import Cython
-    import numpy
-
+def model_key(model: Model) -> str:
+    """A hash of the model: its canonical text, parameter names and gagen's version."""
     h = hashlib.sha256()
-    for part in (src_key, " ".join(flags), sysconfig.get_config_var("EXT_SUFFIX") or "",
-                 numpy.__version__, Cython.__version__, sys.version):
+    for part in (model.canonical(), ",".join(model.parameters), __version__):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
-
-
-def default_cache_dir() -> Path:
-    """$GAGEN_CACHE_DIR, else the user's cache folder ($XDG_CACHE_HOME or ~/.cache)/gagen.
-
-    An empty or relative $XDG_CACHE_HOME is ignored, as the XDG specification says: the cache
-    never lands relative to the working directory.
-    """
-    env = os.environ.get("GAGEN_CACHE_DIR", "").strip()
-    if env:
-        return Path(env).expanduser()
-    if sys.platform == "darwin":
-        return Path.home() / "Library" / "Caches" / "gagen"
-    if os.name == "nt":
-        return Path(os.environ.get("LOCALAPPDATA") or Path.home()) / "gagen" / "Cache"
-    xdg = os.environ.get("XDG_CACHE_HOME", "").strip()
-    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".cache"
-    return base / "gagen"
-
-
-class CacheWarning(UserWarning):
-    """The cache could not be used as it was: an entry was rebuilt, or a temporary folder
-    stands in for an unwritable cache."""
 
 
 class Progress:
@@ -343,102 +295,6 @@ def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
     return final / f"{name}{suffix}", report
 
 
-# --- the cache's own integrity ---------------------------------------------------------------
-
-_CHECKSUM_FILE = "module.sha256"
-_OWNER_FILE = "building.pid"
-ABANDONED_AFTER_SECONDS = 24 * 3600  # a build folder without an owner file: assume dead
-_fallback_cache: Path | None = None
-
-
-def _checksum(module: Path) -> str:
-    """'<sha256> <size> <file name>' of a module, as stored next to it."""
-    data = module.read_bytes()
-    return f"{hashlib.sha256(data).hexdigest()} {len(data)} {module.name}\n"
-
-
-def cached_module_is_intact(entry: Path, module_file: str) -> bool:
-    """Whether a cache entry's module exists and matches its checksum.
-
-    Checked before every import: importing a truncated shared library kills the process
-    (SIGBUS) where no exception can be caught.
-    """
-    module = entry / module_file
-    try:
-        expected = (entry / _CHECKSUM_FILE).read_text().split()
-        if len(expected) != 3 or expected[2] != module_file:
-            return False
-        if module.stat().st_size != int(expected[1]):
-            return False
-        return _checksum(module).split() == expected
-    except (OSError, ValueError):
-        return False
-
-
-def discard_cache_entry(entry: Path) -> None:
-    """Remove a cache entry: renamed aside first, so no process ever sees half of it."""
-    trash = entry.with_name(f".{entry.name}-discarded-{os.getpid()}-{time.monotonic_ns()}")
-    try:
-        os.rename(entry, trash)
-    except OSError:
-        return  # gone already, or another process is discarding it
-    shutil.rmtree(trash, ignore_errors=True)
-
-
-def clean_abandoned_builds(cache: Path) -> None:
-    """Remove build folders left by killed processes (`kill -9`, a power cut).
-
-    A build folder holds its owner's host and pid; it is abandoned when that process no
-    longer runs on this host, or, without an owner file, when it is a day old.
-    """
-    host = socket.gethostname()
-    try:
-        entries = [p for p in cache.iterdir() if p.name.startswith(".gagen_") and p.is_dir()]
-    except OSError:
-        return
-    for folder in entries:
-        if _is_abandoned(folder, host):
-            shutil.rmtree(folder, ignore_errors=True)
-
-
-def _is_abandoned(folder: Path, host: str) -> bool:
-    try:
-        owner = (folder / _OWNER_FILE).read_text().split()
-    except OSError:
-        try:
-            return time.time() - folder.stat().st_mtime > ABANDONED_AFTER_SECONDS
-        except OSError:
-            return False
-    if len(owner) != 2 or owner[0] != host or not owner[1].isdigit():
-        return False  # another machine's build on a shared cache: not ours to judge
-    try:
-        os.kill(int(owner[1]), 0)
-    except ProcessLookupError:
-        return True
-    except (PermissionError, OverflowError):
-        return False
-    return False
-
-
-def usable_cache_dir(cache: Path) -> Path:
-    """`cache`, created if needed, or a private temporary folder (with a CacheWarning) when
-    it cannot be written: a path that is a file, read-only, or unreachable."""
-    global _fallback_cache
-    try:
-        cache.mkdir(parents=True, exist_ok=True)
-        probe = Path(tempfile.mkdtemp(prefix=".gagen-probe-", dir=cache))
-        probe.rmdir()
-        return cache
-    except OSError as exc:
-        reason = exc.strerror or type(exc).__name__
-    if _fallback_cache is None:
-        _fallback_cache = Path(tempfile.mkdtemp(prefix="gagen-cache-"))
-    warnings.warn(f"gagen: cannot write the cache folder {cache} ({reason}); building in "
-                  f"{_fallback_cache} for this process instead. Set GAGEN_CACHE_DIR or "
-                  "cache_dir= to a writable folder to keep builds.", CacheWarning, stacklevel=4)
-    return _fallback_cache
-
-
 def _make_parents(folder: Path) -> list[Path]:
     """Create a folder and its missing parents; return those created, outermost first."""
     missing = []
@@ -464,43 +320,31 @@ def _publish(tmp: Path, final: Path, replace: bool) -> None:
         # another process finished the same build first: keep theirs
 
 
-def import_extension(path: Path, module_name: str):
-    key = str(path.resolve())
-    module = _loaded_modules.get(key)
-    if module is None:
-        spec = importlib.util.spec_from_file_location(module_name, path)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        _loaded_modules[key] = module
-    return module
-
-
 def shipped_module(model: Model, fast_math: bool, portable: bool = False):
-    """The module compiled at install time from `generated/`, if it matches this model."""
+    """The module compiled at install time from `generated/`, if it was built from this model
+    by this generator (a golden file left behind by a generator change is not used)."""
     if fast_math or portable:
         return None
-    name = module_name_for(model, source_key(model))
     try:
-        return importlib.import_module(f"gagen.shipped.{name}")
+        module = importlib.import_module(f"gagen.shipped.{module_name_for(model)}")
     except ImportError:
         return None
-
-
-@functools.cache
-def dynamics_class(module):
-    """The user-facing class: the compiled kernels plus the shared names and parameters."""
-    return type("CompiledDynamics", (module.CompiledModel, DynamicsInfo),
-                {"backend": "compiled", "__module__": "gagen.build"})
+    return module if module.KEY == source_key(model) else None
 
 
 def load_compiled(model: Model, cache_dir: Path | None = None, fast_math: bool = False,
-                  verbose: bool | None = None, portable: bool = False):
-    """The compiled backend of `gagen.load`: shipped module, cached module, or a new build."""
+                  verbose: bool | None = None, portable: bool = False, model_ref=None,
+                  input_digest: str | None = None) -> CompiledDynamics:
+    """The compiled backend of `gagen.load`: shipped module, cached module, or a new build.
+
+    With `input_digest` (gagen.load's key of the input bytes), the module found is recorded
+    in the cache's index, so the next load of the same input needs no SymPy.
+    """
     key = source_key(model)
     module = shipped_module(model, fast_math, portable)
     if module is None:
         options = {"cache_dir": cache_dir, "fast_math": fast_math, "portable": portable,
-                       "verbose": True if verbose is None else verbose}
+                   "verbose": True if verbose is None else verbose}
         path, report = build(model, **options)
         try:
             module = import_extension(path, report.module_name)
@@ -517,7 +361,9 @@ def load_compiled(model: Model, cache_dir: Path | None = None, fast_math: bool =
     if module.KEY != key:
         raise BuildError(f"module {module.__name__} was not built from this version of "
                          f"model '{model.name}' (its key {module.KEY[:12]}, expected {key[:12]})")
-    dyn = dynamics_class(module)()
-    dyn.model = model
-    dyn.module = module
+    if input_digest is not None:
+        index_record(usable_cache_dir(Path(cache_dir) if cache_dir else default_cache_dir()),
+                     input_digest, module)
+    dyn = CompiledDynamics(module, model if model_ref is None else model_ref)
+    dyn.__dict__["_model"] = model
     return dyn

@@ -19,17 +19,16 @@ from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE, precedence
 
 from .. import __version__
+from ..manifest import ModelInfo
 from ..symbolic.gibbs_appell import Equations
+from .config import INLINE_STAGE_OPS, CodegenConfig  # noqa: F401 (re-exported)
 from .cse import CSEResult
+from .ldlt import factor_pattern, ldlt_plan  # noqa: F401 (factor_pattern re-exported)
 from .stages import StageSplit, split_stages
 
 # copied verbatim next to the generated sources (templates/c/)
 COPIED_FILES = ("integrator.c", "integrator.h", "gagen_ode.h", "gagen_second_order.h",
                 "gagen_math.h")
-# Stages of at most this many operations go inline into each integrator stage (sparing a call
-# and its register spills per stage: about 5 % of the paper's robot's simulation); larger
-# ones are called, since a dozen inline copies would multiply their compile time.
-INLINE_STAGE_OPS = 400
 # the C files of a model, all compiled into its module
 MODEL_C_FILES = ("mass_matrix.c", "rhs.c", "simulation.c", "inverse_dynamics.c",
                  "integrator.c")
@@ -90,12 +89,26 @@ class GagenCPrinter(C99CodePrinter):
     function computes first (`trig_prelude`), two coordinates at a time.
     """
 
-    def __init__(self, names: dict[sp.Symbol, str], coordinates: list[sp.Symbol]):
+    def __init__(self, names: dict[sp.Symbol, str], coordinates: list[sp.Symbol],
+                 fast_trig: bool = True):
         # gagen_math.h's sin and cos: about twice as fast as libm's, within 1 ulp
-        super().__init__({"strict": False,
-                          "user_functions": {"sin": "gagen_sin", "cos": "gagen_cos"}})
+        trig = {"sin": "gagen_sin", "cos": "gagen_cos"} if fast_trig else {}
+        super().__init__({"strict": False, "user_functions": trig})
+        self._fast_trig = fast_trig
         self._names = names
         self._angles = {q: k for k, q in enumerate(coordinates)}
+
+    def name_of(self, symbol: sp.Symbol) -> str:
+        """The C name a symbol prints as."""
+        return self._names[symbol]
+
+    def names(self, symbol: sp.Symbol) -> bool:
+        """Whether the symbol has a C name yet."""
+        return symbol in self._names
+
+    def bind_names(self, names: dict[sp.Symbol, str]) -> None:
+        """Give more symbols their C names (the locals hoisted into a stage)."""
+        self._names.update(names)
 
     def _print_Symbol(self, expr):
         return self._names[expr]
@@ -115,6 +128,8 @@ class GagenCPrinter(C99CodePrinter):
         if not used:
             return []
         lines = ["double " + ", ".join(f"sn{k}, cs{k}" for k in used) + ";"]
+        if not self._fast_trig:
+            return lines + [f"sn{k} = sin(q[{k}]); cs{k} = cos(q[{k}]);" for k in used]
         for a, b in zip(used[::2], used[1::2]):
             lines.append(f"gagen_sincos2(q[{a}], q[{b}], &sn{a}, &cs{a}, &sn{b}, &cs{b});")
         if len(used) % 2:
@@ -204,7 +219,7 @@ def _assignments_block(printer: GagenCPrinter, assignments, exprs: list[sp.Expr]
     for a in assignments:
         if a.symbol not in cache:
             cache[a.symbol] = printer.doprint(a.expr)
-    local = [(printer._names[a.symbol], cache[a.symbol]) for a in assignments]
+    local = [(printer.name_of(a.symbol), cache[a.symbol]) for a in assignments]
     outputs = [(t, printer.doprint(e)) for t, e in zip(targets, exprs)]
     prelude = printer.trig_prelude([a.expr for a in assignments] + list(exprs))
     return CodeBlock(prelude=prelude, locals=local, outputs=outputs)
@@ -226,7 +241,8 @@ class Stages:
 
 
 def _stages(eqs: Equations, cse: CSEResult, printer: GagenCPrinter,
-            printed: dict[sp.Symbol, str], targets: dict[str, list[str]]) -> Stages:
+            printed: dict[sp.Symbol, str], targets: dict[str, list[str]],
+            inline_stage_ops: int) -> Stages:
     out = cse.outputs
     coords = eqs.coords
     no_torque = {tau: sp.Integer(0) for tau in coords.tau}
@@ -234,8 +250,8 @@ def _stages(eqs: Equations, cse: CSEResult, printer: GagenCPrinter,
     fixed_outputs = out["mass_matrix"] + out["gravity"]
     split: StageSplit = split_stages(cse.needed(fixed_outputs + free_forcing), fixed_outputs,
                                      free_forcing, set(coords.qd) | set(coords.tau))
-    hoisted = [a for a in split.position if a.symbol not in printer._names]
-    printer._names.update({a.symbol: f"h{k}" for k, a in enumerate(hoisted)})
+    hoisted = [a for a in split.position if not printer.names(a.symbol)]
+    printer.bind_names({a.symbol: f"h{k}" for k, a in enumerate(hoisted)})
     used = set().union(*(a.expr.free_symbols for a in split.velocity),
                        *(e.free_symbols for e in split.velocity_outputs))
     if used & set(coords.tau):
@@ -245,33 +261,22 @@ def _stages(eqs: Equations, cse: CSEResult, printer: GagenCPrinter,
     velocity = _assignments_block(printer, split.velocity, split.velocity_outputs,
                                   targets["forcing"])
     n, ni = eqs.n, len(split.interface)
-    interface = [(k, printer._names[s]) for k, s in enumerate(split.interface)]
+    interface = [(k, printer.name_of(s)) for k, s in enumerate(split.interface)]
     ops = sp.count_ops([a.expr for a in split.position + split.velocity]
                        + fixed_outputs + split.velocity_outputs)
     return Stages(position, velocity, interface, size=ni + 2 * n + n * n, gravity_at=ni,
-                  dinv_at=ni + n, mass_at=ni + 2 * n, ops=ops, inline=ops <= INLINE_STAGE_OPS)
+                  dinv_at=ni + n, mass_at=ni + 2 * n, ops=ops,
+                  inline=ops <= inline_stage_ops)
 
 
-def factor_pattern(n: int, zero: set[tuple[int, int]]) -> set[tuple[int, int]]:
-    """Entries (i, j), i > j, of the LDL^T factor that can be non-zero, fill-in included.
-
-    The unrolled factorisation skips every product with a structural zero of M, e.g. the
-    coupling between a vertical base joint and the joints of a planar arm."""
-    nonzero: set[tuple[int, int]] = set()
-    for j in range(n):
-        for i in range(j + 1, n):
-            if (i, j) not in zero or any((i, k) in nonzero and (j, k) in nonzero
-                                         for k in range(j)):
-                nonzero.add((i, j))
-    return nonzero
-
-
-def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
+def generate(eqs: Equations, module_name: str, key: str,
+             config: CodegenConfig | None = None) -> GeneratedCode:
     """Generate the C sources, header and Cython wrapper of a model (file name -> text)."""
+    config = config or CodegenConfig()
     model = eqs.model
     ident = c_identifier(model.name)
     cse = CSEResult(eqs)
-    printer = GagenCPrinter(_symbol_names(eqs, cse), list(eqs.coords.q))
+    printer = GagenCPrinter(_symbol_names(eqs, cse), list(eqs.coords.q), config.fast_trig)
     n = eqs.n
     lower = [(r, s) for r in range(n) for s in range(r + 1)]
     out = cse.outputs
@@ -289,7 +294,8 @@ def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
     }
     stages = _stages(eqs, cse, printer, printed, {"mass_matrix": mass_targets,
                                                   "gravity": gravity_targets,
-                                                  "forcing": forcing_targets})
+                                                  "forcing": forcing_targets},
+                     config.inline_stage_ops)
     zero = {(r, s) for (r, s), e in zip(lower, out["mass_matrix"]) if e == 0}
     context = {
         "ident": ident,
@@ -300,11 +306,13 @@ def generate(eqs: Equations, module_name: str, key: str) -> GeneratedCode:
         "coordinates": [c_identifier(c) for c in model.coordinates],
         "parameters": [(c_identifier(k), repr(float(v))) for k, v in model.parameters.items()],
         "lower": lower,
-        "lnz": factor_pattern(n, zero),
+        "ldlt": ldlt_plan(n, zero),
         "blocks": blocks,
         "stages": stages,
         "module_name": module_name,
         "key": key,
+        # names, joints and defaults for the runtime, as hex digits: no text of the model
+        "manifest_hex": ModelInfo.from_model(model).to_hex(),
         "version": __version__,
         "header": f"generated by gagen {__version__} for model '{ident}'; do not edit",
     }

@@ -1,108 +1,106 @@
-"""The runtime API shared by every backend: names, parameters and input checks."""
+"""The runtime API, written once for every backend: names, parameters, and the documented
+dynamics methods (the backends supply the numbers)."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from functools import cached_property
 
 import numpy as np
 
 from ..errors import SingularMassMatrixError  # noqa: F401 (re-exported)
-from ..model.model import Model
+from ..manifest import ModelInfo
+from .inputs import as_states, parameter_array  # noqa: F401 (as_states re-exported)
 
 
-class DynamicsInfo:
-    """Names and parameter handling, mixed into every backend's dynamics object."""
+class Dynamics:
+    """A model's equations of motion, M(q) q̈ = F(q, q̇, τ), evaluated numerically.
 
-    model: Model
+    Every method takes one state (arrays of shape (n,)) or N stacked states (shape (N, n))
+    and returns fresh arrays: nothing returned is ever overwritten by a later call.
+    `p` is None (the model's defaults), a dict of overrides by name, or a full array in
+    `parameters` order.
+    """
+
     backend: str
+    info: ModelInfo
+    _model_ref: object = None
+
+    # --- names and parameters --------------------------------------------------------------
+
+    @property
+    def model(self):
+        """The full `gagen.model.Model` (symbolic; read from its source on first use)."""
+        model = self.__dict__.get("_model")
+        if model is None:
+            from ..model.resolve import resolve_model
+
+            model = self.__dict__["_model"] = resolve_model(self._model_ref)
+        return model
 
     @property
     def coordinates(self) -> list[str]:
+        """The coordinates' names (the moving joints), in the order of q."""
         return list(self._coordinates)
 
     @property
     def parameters(self) -> dict[str, float]:
-        return dict(self.model.parameters)
+        """The parameters' names and default values, in the order of a p array."""
+        return self.info.parameter_defaults
 
     @property
     def n(self) -> int:
+        """The number of coordinates."""
         return len(self._coordinates)
 
     @cached_property
     def _coordinates(self) -> tuple[str, ...]:
-        # the model is fixed once its equations are built; walking its tree on every
-        # call would cost microseconds in the simulation loop
-        return tuple(self.model.coordinates)
+        return tuple(self.info.coordinates)
+
+    @cached_property
+    def _parameter_names(self) -> list[str]:
+        return [name for name, _ in self.info.parameters]
+
+    @cached_property
+    def _default_parameters(self) -> np.ndarray:
+        return self.info.parameter_vector()
 
     def parameter_vector(self, p=None) -> np.ndarray:
         """Full parameter array in `parameters` order from None, a dict of overrides or an array."""
-        if p is None:
-            cached = self.__dict__.get("_default_parameters")
-            if cached is None:
-                # the defaults are fixed when the equations are built (the compiled module
-                # bakes them in), so they are read from the model once
-                cached = self.__dict__["_default_parameters"] = self.model.parameter_vector()
-            return cached.copy()
-        defaults = self.model.parameter_vector()
-        if isinstance(p, Mapping):
-            names = list(self.model.parameters)
-            out = defaults.copy()
-            index = {name: k for k, name in enumerate(names)}
-            for key, value in p.items():
-                if key not in index:
-                    raise KeyError(f"unknown parameter '{key}' (parameters: {', '.join(names)})")
-                if isinstance(value, (str, bytes)) or value is None:
-                    raise TypeError(f"parameter '{key}' must be a number, got {value!r}")
-                out[index[key]] = float(value)
-            return _finite_parameters(out)
-        arr = np.asarray(p)
-        if arr.dtype.kind not in "biuf":
-            raise TypeError(f"p must hold real numbers, got dtype {arr.dtype}")
-        arr = arr.astype(float)
-        if arr.shape != defaults.shape:
-            raise ValueError(f"p must be None, a dict of overrides or an array of "
-                             f"{defaults.size} parameters in dyn.parameters order; got shape {arr.shape}")
-        return _finite_parameters(np.ascontiguousarray(arr))
+        return parameter_array(p, self._parameter_names, self._default_parameters)
 
     def __repr__(self) -> str:
-        return (f"<gagen dynamics '{self.model.name}' backend={self.backend} "
+        return (f"<gagen dynamics '{self.info.name}' backend={self.backend} "
                 f"coordinates={self.coordinates}>")
 
+    # --- the dynamics (each backend implements these) --------------------------------------
 
-def _finite_parameters(values: np.ndarray) -> np.ndarray:
-    """Refuse NaN and inf parameters: they would poison every output without a word."""
-    bad = np.flatnonzero(~np.isfinite(values))
-    if bad.size:
-        raise ValueError(f"parameters must be finite; entry {int(bad[0])} is {values[bad[0]]}")
-    return values
+    def mass_matrix(self, q, p=None) -> np.ndarray:
+        """M(q): shape (n, n), or (N, n, n) for stacked q. Symmetric positive definite."""
+        raise NotImplementedError
+
+    def forcing(self, q, qd, tau, p=None) -> np.ndarray:
+        """F(q, q̇, τ) such that M(q) q̈ = F: shape (n,) or (N, n)."""
+        raise NotImplementedError
+
+    def forward_dynamics(self, q, qd, tau, p=None) -> np.ndarray:
+        """q̈ = M(q)⁻¹ F(q, q̇, τ): shape (n,) or (N, n).
+
+        Raises SingularMassMatrixError when M(q) is not positive definite (zero or negative
+        masses or inertias), NonFiniteStateError when q holds NaN or inf."""
+        raise NotImplementedError
+
+    def inverse_dynamics(self, q, qd, qdd, p=None) -> np.ndarray:
+        """The joint torques (forces for prismatic joints) τ that give q̈: shape (n,) or (N, n)."""
+        raise NotImplementedError
+
+    def gravity(self, q, p=None) -> np.ndarray:
+        """The gravity torques g(q) = inverse_dynamics(q, 0, 0): shape (n,) or (N, n)."""
+        raise NotImplementedError
+
+    def energy(self, q, qd, p=None):
+        """(kinetic, potential): floats, or arrays of shape (N,) for stacked states."""
+        raise NotImplementedError
 
 
-def as_states(n: int, *arrays, names: tuple[str, ...]) -> tuple[list[np.ndarray], bool]:
-    """Check and convert inputs of shape (n,) or stacked (N, n); say whether they were stacked."""
-    out = []
-    stacked_shape = None
-    for name, a in zip(names, arrays):
-        arr = _as_float_array(a, name)
-        if arr.ndim == 1 and arr.shape[0] == n:
-            pass
-        elif arr.ndim == 2 and arr.shape[1] == n:
-            if stacked_shape is not None and arr.shape[0] != stacked_shape:
-                raise ValueError(f"{name} has {arr.shape[0]} rows, other inputs have {stacked_shape}")
-            stacked_shape = arr.shape[0]
-        else:
-            raise ValueError(f"{name} must have shape ({n},) or (N, {n}); got {arr.shape}")
-        out.append(arr)
-    stacked = stacked_shape is not None
-    if stacked:
-        out = [np.broadcast_to(a, (stacked_shape, n)) if a.ndim == 1 else a for a in out]
-    return out, stacked
-
-
-def _as_float_array(a, name: str) -> np.ndarray:
-    if isinstance(a, (str, bytes)) or a is None:
-        raise TypeError(f"{name} must be an array of numbers, got {type(a).__name__}")
-    arr = np.asarray(a)
-    if arr.dtype == object or arr.dtype.kind not in "biuf":
-        raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
-    return arr.astype(float, copy=False)
+# The name of earlier versions, kept for code that imported it.
+DynamicsInfo = Dynamics

@@ -6,8 +6,9 @@ import numpy as np
 import sympy as sp
 
 from ..errors import NonFiniteStateError
+from ..manifest import ModelInfo
 from ..symbolic.gibbs_appell import Equations
-from .dynamics import DynamicsInfo, SingularMassMatrixError, as_states
+from .dynamics import Dynamics, SingularMassMatrixError, as_states
 
 
 def _needed_intermediates(eqs: Equations, exprs) -> list[tuple[sp.Symbol, sp.Expr]]:
@@ -23,7 +24,7 @@ def _needed_intermediates(eqs: Equations, exprs) -> list[tuple[sp.Symbol, sp.Exp
     return [eqs.intermediates[k] for k in sorted(defined[s][0] for s in needed)]
 
 
-class LambdifyDynamics(DynamicsInfo):
+class LambdifyDynamics(Dynamics):
     """`gagen.load(..., backend="lambdify")`: NumPy functions made by `sympy.lambdify`.
 
     The intermediates of the derivation are handed to lambdify as its common
@@ -33,7 +34,8 @@ class LambdifyDynamics(DynamicsInfo):
     backend = "lambdify"
 
     def __init__(self, eqs: Equations):
-        self.model = eqs.model
+        self.__dict__["_model"] = eqs.model
+        self.info = ModelInfo.from_model(eqs.model)
         self.equations = eqs
         c = eqs.coords
         outs = eqs.outputs()

@@ -20,6 +20,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..manifest import ModelInfo
 from .trajectory import PAPER_QF, Eq11Trajectory
 
 # C controller kinds (integrator.h: GAGEN_CTRL_*).
@@ -244,17 +245,16 @@ def default_target(model) -> np.ndarray:
     """
     if is_paper_robot(model):
         return np.array(PAPER_TARGET)
+    info = model if isinstance(model, ModelInfo) else ModelInfo.from_model(model)
     out = []
-    for body in model.moving_bodies:
-        j = body.joint
+    for j in info.joints:
         value = DEFAULT_SLIDE_TARGET if j.type == "prismatic" else DEFAULT_ROTATION_TARGET
-        limits = j.limits if j.type != "continuous" else None
-        if limits is not None and not (limits.lower is not None and limits.upper is not None
-                                       and limits.lower >= limits.upper):
-            if limits.lower is not None:
-                value = max(value, float(limits.lower))
-            if limits.upper is not None:
-                value = min(value, float(limits.upper))
+        lower, upper = (None, None) if j.type == "continuous" else (j.lower, j.upper)
+        if not (lower is not None and upper is not None and lower >= upper):
+            if lower is not None:
+                value = max(value, lower)
+            if upper is not None:
+                value = min(value, upper)
         out.append(value)
     return np.array(out, dtype=float)
 
@@ -268,9 +268,9 @@ def default_controller(dyn, p=None) -> PD:
     damped as if it moved alone with its largest inertia along the way (settling in about
     1.5 s), and over-damped, never oscillating, where its inertia is smaller.
     """
-    if is_paper_robot(dyn.model):
+    if is_paper_robot(dyn.info):
         return paper_controller()
-    target = default_target(dyn.model)
+    target = default_target(dyn.info)
     samples = np.stack([np.zeros(dyn.n), 0.5 * target, target])
     M = np.asarray(dyn.mass_matrix(samples, p))
     inertia = np.maximum(np.diagonal(M, axis1=1, axis2=2).max(axis=0), 1e-6)

@@ -364,7 +364,7 @@ def _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_e
                          "use a larger h, or pass a larger max_steps")
 
     start = time.perf_counter()
-    sim = module.CompiledSimulation(dyn, pvec, **spec)
+    sim = module.CompiledSimulation(dyn.kernels, pvec, **spec)
     q, qd, tau, status, info = sim.run(method, t0, t1, q0, qd0, te, rtol, atol, first_step,
                                        max_step, max_steps, h)
     if status != 0:
@@ -399,7 +399,7 @@ def _raise_status(status: int, method: str, te, q, dyn):
     where = f" after t = {te[reached][-1]:g}" if reached.any() else " before the first sample"
     if status == 1:
         raise SingularMassMatrixError(
-            f"{method}: the mass matrix of '{dyn.model.name}' became singular or not positive "
+            f"{method}: the mass matrix of '{dyn.info.name}' became singular or not positive "
             f"definite{where}; check the parameters (zero or negative masses, inertias) and "
             "the state for NaN or inf")
     if status in (2, -105):

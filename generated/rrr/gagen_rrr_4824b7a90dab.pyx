@@ -9,6 +9,7 @@ from libc.math cimport NAN, isfinite
 
 from cpython.exc cimport PyErr_CheckSignals
 from gagen.errors import NonFiniteStateError, SingularMassMatrixError
+from gagen.runtime.inputs import as_float_array
 
 cnp.import_array()
 
@@ -51,7 +52,8 @@ cdef extern from "integrator.h" nogil:
         GAGEN_METHOD_DOPRI5
         GAGEN_METHOD_RK4
 
-KEY = "ca04c46ac405c7e745251a49313e4edd134f9c55f13fe8a8ad3a4167b48bc29a"
+KEY = "da7a6b1ed82b1f9d80702b2f31f74b79b66ef08db7e5ea3f59a10d65dec2d478"
+MANIFEST_HEX = "7b226a6f696e7473223a205b7b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227131222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d2c207b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227132222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d2c207b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227133222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d5d2c20226e616d65223a2022727272222c2022706172616d6574657273223a205b5b2267222c20392e38315d2c205b224c31222c20302e345d2c205b224c32222c20302e345d2c205b224c33222c20302e345d2c205b226d31222c2036302e305d2c205b226d32222c2035302e305d2c205b226d33222c2034302e305d2c205b22493178222c20302e385d2c205b22493179222c20302e3037355d2c205b2249317a222c20302e385d2c205b22493278222c20302e363636363636363636363636363636365d2c205b22493279222c20302e303632355d2c205b2249327a222c20302e363636363636363636363636363636365d2c205b22493378222c20302e353333333333333333333333333333335d2c205b22493379222c20302e30355d2c205b2249337a222c20302e353333333333333333333333333333335d5d2c2022736f75726365223a20226275696c74696e3a727272227d"
 # The model's names are not in this file (it holds code, and identifiers only); gagen keeps
 # them with the model. The defaults are printed numbers, in the order of p.
 PARAMETER_DEFAULTS = (9.81, 0.4, 0.4, 0.4, 60.0, 50.0, 40.0, 0.8, 0.075, 0.8, 0.6666666666666666, 0.0625, 0.6666666666666666, 0.5333333333333333, 0.05, 0.5333333333333333, )
@@ -100,13 +102,8 @@ cdef int _mass(const double *a, const double *b, const double *c, const double *
 
 
 def _converted(x, name):
-    """The slow path: lists, other dtypes, non-contiguous arrays."""
-    if x is None or isinstance(x, (str, bytes)):
-        raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}")
-    arr = np.asarray(x)
-    if arr.dtype.kind not in "biuf":
-        raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
-    return np.ascontiguousarray(arr, dtype=np.float64)
+    """The slow path (lists, other dtypes, non-contiguous arrays): gagen's one input check."""
+    return np.ascontiguousarray(as_float_array(x, name))
 
 
 cdef inline cnp.ndarray _state(object x, str name):
@@ -158,14 +155,20 @@ cdef inline Py_ssize_t _step(cnp.ndarray a) noexcept:
 
 
 cdef class CompiledModel:
-    """The compiled kernels; gagen mixes in names and parameter handling."""
+    """The compiled kernels. gagen.runtime.compiled.CompiledDynamics binds these methods
+    (their documentation is gagen.runtime.dynamics.Dynamics's); parameter_vector turns the
+    p= forms other than a float64 array into one (None, a dict of overrides, a list)."""
 
     cdef double _defaults[16]
+    cdef readonly object parameter_vector
 
     def __cinit__(self):
         cdef int k
         for k in range(NP):
             self._defaults[k] = PARAMETER_DEFAULTS[k]
+
+    def __init__(self, parameter_vector):
+        self.parameter_vector = parameter_vector
 
     cdef cnp.ndarray _parameters(self, object p):
         if type(p) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>p) == cnp.NPY_DOUBLE \

@@ -1,0 +1,301 @@
+"""The cache of compiled modules, and the SymPy-free way back to them.
+
+A build is keyed by everything its module depends on (see `build_key`); a finished entry
+holds the module, its sources and the module's SHA-256, checked before every import. An
+index maps a key of the *input* (the bytes of the model file or URDF, the options, gagen's
+version and pipeline, the ABI) to the module built from it, so that loading a model built
+before reads neither the model nor SymPy.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import importlib.util
+import json
+import os
+import shutil
+import socket
+import sys
+import sysconfig
+import tempfile
+import time
+import warnings
+from functools import cache as _memoized
+from importlib import metadata, resources
+from pathlib import Path
+
+from .. import __version__
+
+DEFAULT_FLAGS = ("-O3",)
+FAST_MATH_FLAGS = ("-ffast-math",)
+# One version of the kernels for any CPU of the architecture: no FMA clone (gagen_math.h)
+PORTABLE_FLAGS = ("-DGAGEN_KERNEL=",)
+_loaded_modules: dict[str, object] = {}
+
+
+# The sub-packages whose code (and templates) decides what the generated sources say.
+GENERATOR_PACKAGES = ("symbolic", "codegen")
+
+
+# ... and, for a key of the input bytes, the stage that reads them too.
+PIPELINE_PACKAGES = ("model", *GENERATOR_PACKAGES)
+
+
+def generator_digest() -> str:
+    """A hash of the generator's own code and templates, so that a changed generator never
+    reuses a build: every file of the symbolic and codegen stages, in a fixed order."""
+    return _packages_digest(GENERATOR_PACKAGES)
+
+
+@_memoized
+def _packages_digest(packages: tuple[str, ...]) -> str:
+    # memoized: the installed code does not change while a process runs (a test that edits
+    # a copy of the package runs that copy in a fresh process)
+    h = hashlib.sha256()
+    for package in packages:
+        root = resources.files(f"gagen.{package}")
+        for path in sorted(_files(root), key=lambda item: item[0]):
+            h.update(path[0].encode())
+            h.update(path[1].read_bytes())
+    return h.hexdigest()
+
+
+def _files(folder, prefix: str = ""):
+    """(relative name, traversable) of every source and template file under a folder."""
+    for item in folder.iterdir():
+        name = f"{prefix}{item.name}"
+        if item.is_dir():
+            if item.name != "__pycache__":
+                yield from _files(item, name + "/")
+        elif item.name.endswith((".py", ".j2", ".h", ".c")):
+            yield name, item
+
+
+def compile_flags(fast_math: bool = False, portable: bool = False) -> list[str]:
+    """The compiler flags: -O3, plus -ffast-math on request, plus no per-CPU kernel clones
+    with `portable` (for a module copied to other machines, and to test that version)."""
+    return (list(DEFAULT_FLAGS) + (list(FAST_MATH_FLAGS) if fast_math else [])
+            + (list(PORTABLE_FLAGS) if portable else []))
+
+
+def build_key(src_key: str, flags: list[str]) -> str:
+    """Hash of the sources plus what the binary depends on: flags, Python ABI, NumPy, Cython."""
+    return _hash(src_key, " ".join(flags), *_binary_interface())
+
+
+@_memoized
+def _binary_interface() -> tuple[str, ...]:
+    """What a compiled module depends on besides its sources (read without importing Cython)."""
+    import numpy
+
+    return (sysconfig.get_config_var("EXT_SUFFIX") or "", numpy.__version__,
+            metadata.version("Cython"), sys.version)
+
+
+def _hash(*parts: str | bytes) -> str:
+    h = hashlib.sha256()
+    for part in parts:
+        h.update(part.encode() if isinstance(part, str) else part)
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+# --- the index: input bytes -> module, without SymPy ----------------------------------------
+
+def input_key(model, flags: list[str]) -> str | None:
+    """A key of what the user named (a built-in's name and text, or a file's bytes), the
+    compile flags, gagen's version and pipeline, and the ABI; None if the input cannot be
+    read here (the model stage then reports why)."""
+    text = str(model)
+    if text == "rrr" or text.startswith("chain:"):
+        source = resources.files("gagen.model").joinpath("rrr.yaml").read_bytes() \
+            if text == "rrr" else b""
+        kind = f"builtin:{text}"
+    else:
+        from ..model.inputs import MAX_FILE_BYTES
+
+        path = Path(text)
+        try:
+            if not path.is_file() or path.stat().st_size > MAX_FILE_BYTES:
+                return None
+            source = path.read_bytes()
+        except OSError:
+            return None
+        kind = f"file{path.suffix.lower()}"
+    return _hash("gagen-input", kind, source, " ".join(flags), __version__,
+                 _packages_digest(PIPELINE_PACKAGES), *_binary_interface())
+
+
+def index_lookup(cache: Path, key: str):
+    """The module recorded for an input key, imported, or None (no record, or the module is
+    gone or damaged: the caller builds again, which repairs the entry)."""
+    try:
+        record = json.loads((cache / "index" / key[:40]).read_text())
+    except (OSError, ValueError):
+        return None
+    if "shipped" in record:
+        try:
+            return importlib.import_module(f"gagen.shipped.{record['shipped']}")
+        except ImportError:
+            return None
+    entry = cache / str(record.get("entry", ""))
+    module_file = str(record.get("module", ""))
+    if not module_file or not cached_module_is_intact(entry, module_file):
+        return None
+    try:
+        return import_extension(entry / module_file, module_file.split(".")[0])
+    except ImportError:
+        return None
+
+
+def index_record(cache: Path, key: str, module) -> None:
+    """Record which module an input key gave (best effort: a read-only cache just misses)."""
+    path = Path(getattr(module, "__file__", "") or "")
+    name = module.__name__
+    if name.startswith("gagen.shipped."):
+        record = {"shipped": name.rsplit(".", 1)[1]}
+    elif path.parent.parent.resolve() == cache.resolve():
+        record = {"entry": path.parent.name, "module": path.name}
+    else:
+        return
+    try:
+        folder = cache / "index"
+        folder.mkdir(parents=True, exist_ok=True)
+        tmp = folder / f".{key[:40]}-{os.getpid()}"
+        tmp.write_text(json.dumps(record))
+        os.replace(tmp, folder / key[:40])
+    except OSError:
+        pass
+
+
+def default_cache_dir() -> Path:
+    """$GAGEN_CACHE_DIR, else the user's cache folder ($XDG_CACHE_HOME or ~/.cache)/gagen.
+
+    An empty or relative $XDG_CACHE_HOME is ignored, as the XDG specification says: the cache
+    never lands relative to the working directory.
+    """
+    env = os.environ.get("GAGEN_CACHE_DIR", "").strip()
+    if env:
+        return Path(env).expanduser()
+    if sys.platform == "darwin":
+        return Path.home() / "Library" / "Caches" / "gagen"
+    if os.name == "nt":
+        return Path(os.environ.get("LOCALAPPDATA") or Path.home()) / "gagen" / "Cache"
+    xdg = os.environ.get("XDG_CACHE_HOME", "").strip()
+    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".cache"
+    return base / "gagen"
+
+
+class CacheWarning(UserWarning):
+    """The cache could not be used as it was: an entry was rebuilt, or a temporary folder
+    stands in for an unwritable cache."""
+
+
+# --- the cache's own integrity ---------------------------------------------------------------
+
+_CHECKSUM_FILE = "module.sha256"
+_OWNER_FILE = "building.pid"
+ABANDONED_AFTER_SECONDS = 24 * 3600  # a build folder without an owner file: assume dead
+_fallback_cache: Path | None = None
+
+
+def _checksum(module: Path) -> str:
+    """'<sha256> <size> <file name>' of a module, as stored next to it."""
+    data = module.read_bytes()
+    return f"{hashlib.sha256(data).hexdigest()} {len(data)} {module.name}\n"
+
+
+def cached_module_is_intact(entry: Path, module_file: str) -> bool:
+    """Whether a cache entry's module exists and matches its checksum.
+
+    Checked before every import: importing a truncated shared library kills the process
+    (SIGBUS) where no exception can be caught.
+    """
+    module = entry / module_file
+    try:
+        expected = (entry / _CHECKSUM_FILE).read_text().split()
+        if len(expected) != 3 or expected[2] != module_file:
+            return False
+        if module.stat().st_size != int(expected[1]):
+            return False
+        return _checksum(module).split() == expected
+    except (OSError, ValueError):
+        return False
+
+
+def discard_cache_entry(entry: Path) -> None:
+    """Remove a cache entry: renamed aside first, so no process ever sees half of it."""
+    trash = entry.with_name(f".{entry.name}-discarded-{os.getpid()}-{time.monotonic_ns()}")
+    try:
+        os.rename(entry, trash)
+    except OSError:
+        return  # gone already, or another process is discarding it
+    shutil.rmtree(trash, ignore_errors=True)
+
+
+def clean_abandoned_builds(cache: Path) -> None:
+    """Remove build folders left by killed processes (`kill -9`, a power cut).
+
+    A build folder holds its owner's host and pid; it is abandoned when that process no
+    longer runs on this host, or, without an owner file, when it is a day old.
+    """
+    host = socket.gethostname()
+    try:
+        entries = [p for p in cache.iterdir() if p.name.startswith(".gagen_") and p.is_dir()]
+    except OSError:
+        return
+    for folder in entries:
+        if _is_abandoned(folder, host):
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def _is_abandoned(folder: Path, host: str) -> bool:
+    try:
+        owner = (folder / _OWNER_FILE).read_text().split()
+    except OSError:
+        try:
+            return time.time() - folder.stat().st_mtime > ABANDONED_AFTER_SECONDS
+        except OSError:
+            return False
+    if len(owner) != 2 or owner[0] != host or not owner[1].isdigit():
+        return False  # another machine's build on a shared cache: not ours to judge
+    try:
+        os.kill(int(owner[1]), 0)
+    except ProcessLookupError:
+        return True
+    except (PermissionError, OverflowError):
+        return False
+    return False
+
+
+def usable_cache_dir(cache: Path) -> Path:
+    """`cache`, created if needed, or a private temporary folder (with a CacheWarning) when
+    it cannot be written: a path that is a file, read-only, or unreachable."""
+    global _fallback_cache
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+        probe = Path(tempfile.mkdtemp(prefix=".gagen-probe-", dir=cache))
+        probe.rmdir()
+        return cache
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+    if _fallback_cache is None:
+        _fallback_cache = Path(tempfile.mkdtemp(prefix="gagen-cache-"))
+    warnings.warn(f"gagen: cannot write the cache folder {cache} ({reason}); building in "
+                  f"{_fallback_cache} for this process instead. Set GAGEN_CACHE_DIR or "
+                  "cache_dir= to a writable folder to keep builds.", CacheWarning, stacklevel=4)
+    return _fallback_cache
+
+
+def import_extension(path: Path, module_name: str):
+    key = str(path.resolve())
+    module = _loaded_modules.get(key)
+    if module is None:
+        spec = importlib.util.spec_from_file_location(module_name, path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        _loaded_modules[key] = module
+    return module
+
+

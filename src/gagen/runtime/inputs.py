@@ -1,0 +1,74 @@
+"""The one set of input checks of the runtime, shared by both backends (the compiled
+module's slow path calls these too): states as float arrays of shape (n,) or (N, n), and
+parameters as a finite float array."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+
+def as_float_array(a, name: str) -> np.ndarray:
+    """`a` as a float64 array; TypeError for text, None and non-numeric dtypes."""
+    if isinstance(a, (str, bytes)) or a is None:
+        raise TypeError(f"{name} must be an array of numbers, got {type(a).__name__}")
+    arr = np.asarray(a)
+    if arr.dtype == object or arr.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+    return arr.astype(float, copy=False)
+
+
+def as_states(n: int, *arrays, names: tuple[str, ...]) -> tuple[list[np.ndarray], bool]:
+    """Check and convert inputs of shape (n,) or stacked (N, n); say whether they were stacked."""
+    out = []
+    stacked_shape = None
+    for name, a in zip(names, arrays):
+        arr = as_float_array(a, name)
+        if arr.ndim == 1 and arr.shape[0] == n:
+            pass
+        elif arr.ndim == 2 and arr.shape[1] == n:
+            if stacked_shape is not None and arr.shape[0] != stacked_shape:
+                raise ValueError(f"{name} has {arr.shape[0]} rows, other inputs have {stacked_shape}")
+            stacked_shape = arr.shape[0]
+        else:
+            raise ValueError(f"{name} must have shape ({n},) or (N, {n}); got {arr.shape}")
+        out.append(arr)
+    stacked = stacked_shape is not None
+    if stacked:
+        out = [np.broadcast_to(a, (stacked_shape, n)) if a.ndim == 1 else a for a in out]
+    return out, stacked
+
+
+def parameter_array(p, names: list[str], defaults: np.ndarray) -> np.ndarray:
+    """The full parameter array from None, a dict of overrides or an array (fresh, finite)."""
+    if p is None:
+        return defaults.copy()
+    if isinstance(p, Mapping):
+        out = defaults.copy()
+        index = {name: k for k, name in enumerate(names)}
+        for key, value in p.items():
+            if key not in index:
+                raise KeyError(f"unknown parameter '{key}' (parameters: {', '.join(names)})")
+            if isinstance(value, (str, bytes)) or value is None:
+                raise TypeError(f"parameter '{key}' must be a number, got {value!r}")
+            if isinstance(value, complex) or np.iscomplexobj(value):
+                raise TypeError(f"parameter '{key}' must be a real number, got {value!r}")
+            out[index[key]] = float(value)
+        return finite_parameters(out)
+    arr = np.asarray(p)
+    if arr.dtype.kind not in "biuf":
+        raise TypeError(f"p must hold real numbers, got dtype {arr.dtype}")
+    arr = arr.astype(float)
+    if arr.shape != defaults.shape:
+        raise ValueError(f"p must be None, a dict of overrides or an array of {defaults.size} "
+                         f"parameters in dyn.parameters order; got shape {arr.shape}")
+    return finite_parameters(np.ascontiguousarray(arr))
+
+
+def finite_parameters(values: np.ndarray) -> np.ndarray:
+    """Refuse NaN and inf parameters: they would poison every output without a word."""
+    bad = np.flatnonzero(~np.isfinite(values))
+    if bad.size:
+        raise ValueError(f"parameters must be finite; entry {int(bad[0])} is {values[bad[0]]}")
+    return values
