@@ -1,0 +1,316 @@
+"""The equations of motion by recursive algorithms over the tree (Newton-Euler and CRBA).
+
+`derive_recursive(model)` returns the same `Equations` as `gibbs_appell.derive`, with the
+same symbols, but builds them the way numerical dynamics libraries compute them:
+
+- the recursive Newton-Euler algorithm (RNEA) for the inverse dynamics, the velocity
+  terms b(q, qd) (qdd = 0, no gravity) and the gravity forces (q alone);
+- the composite-rigid-body algorithm (CRBA) for the mass matrix M(q).
+
+Every vector is expressed in its body's own frame (as in `kinematics`), and every
+component of every per-body quantity is named by an intermediate symbol, so each
+definition is a few operations whatever the depth of the tree: the RNEA is O(n)
+definitions and the CRBA O(n * depth), one short expression per entry of M.
+
+Conventions (those of `kinematics`): body i's frame is its joint frame; the joint origin
+(translation d and rotation R0, in the parent's frame) places it, then the joint rotates
+by q about its unit axis s (R = R0 Rot(s, q)) or slides by q along it (d + R0 s q). A
+vector v of the parent's frame is R^T v in the child's. Spatial quantities are taken
+about the body frame's origin O_i: a body's inertia there is (m, h = m c, I_O) with
+I_O = I_C + m [c]^T [c] (parallel axes). Gravity enters the RNEA as an acceleration
+-g of the world frame.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import sympy as sp
+
+from ..model.model import Body, Model
+from .gibbs_appell import Equations
+from .kinematics import CoordinateSymbols, Recorder, axis_rotation, unit_axis
+
+Vec = sp.Matrix
+ZERO = sp.zeros(3, 1)
+
+
+@dataclass
+class Link:
+    """One body of the tree with its joint's transform from the parent, named once."""
+
+    body: Body
+    parent: int | None          # index into the list of links, None for the world
+    k: int | None               # coordinate index, None for a fixed joint
+    rotates: bool
+    axis: Vec                   # unit joint axis s, in this body's frame
+    R: sp.Matrix                # parent-frame components of this frame's axes
+    d: Vec                      # O_i - O_parent, in the parent's frame
+    mass: sp.Expr
+    h: Vec                      # first moment m c about O_i
+    I_O: sp.Matrix              # inertia about O_i
+
+    def to_child(self, v: Vec, rec: Recorder) -> Vec:
+        return rec.vec(self.R.T * v)
+
+    def to_parent(self, v: Vec, rec: Recorder) -> Vec:
+        return rec.vec(self.R * v)
+
+
+def derive_recursive(model: Model) -> Equations:
+    """The equations of motion of a model by the RNEA and the CRBA (see module docstring)."""
+    start = time.perf_counter()
+    coords = CoordinateSymbols.for_model(model)
+    rec = Recorder()
+    links = _links(model, coords, rec)
+    gravity = sp.Matrix(model.gravity)
+    w = _angular_velocities(links, coords, rec)
+    inverse = sp.Matrix(_rnea(links, coords, rec, w, coords.qdd, gravity))
+    b = sp.Matrix(_rnea(links, coords, rec, w, None, None))
+    Qg = -sp.Matrix(_rnea(links, coords, rec, None, None, gravity))
+    M = _crba(links, model.dof, rec)
+    tau = sp.Matrix(coords.tau)
+    T, V = _energies(links, coords, rec, w, gravity)
+    eqs = Equations(
+        model=model,
+        coords=coords,
+        parameters=[sp.Symbol(k) for k in model.parameters],
+        intermediates=rec.definitions,
+        gibbs=[],  # no Gibbs function here; nothing downstream of derive() reads it
+        mass_matrix=M,
+        velocity_terms=b,
+        gravity_forces=Qg,
+        forcing=tau + Qg - b,
+        inverse_dynamics=inverse,
+        kinetic_energy=T,
+        potential_energy=V,
+    )
+    eqs.seconds = time.perf_counter() - start
+    return eqs
+
+
+def _links(model: Model, coords: CoordinateSymbols, rec: Recorder) -> list[Link]:
+    """The joint transforms and the inertias about the frame origins, parents first."""
+    position = {b.name: i for i, b in enumerate(model.bodies)}
+    index = {b.joint.name: k for k, b in enumerate(model.moving_bodies)}
+    links = []
+    for body in model.bodies:
+        joint = body.joint
+        k = index[joint.name] if joint.moves else None
+        axis = unit_axis(joint.axis)
+        R = sp.Matrix(joint.origin_rotation)
+        d = sp.Matrix(joint.origin_xyz)
+        if joint.rotates:
+            c, s = rec.name(sp.cos(coords.q[k])), rec.name(sp.sin(coords.q[k]))
+            R = (R * axis_rotation(axis, c, s)).applyfunc(sp.expand)
+        elif joint.type == "prismatic":
+            d = d + sp.Matrix(joint.origin_rotation) * axis * coords.q[k]
+        m = sp.sympify(body.mass)
+        c_vec = sp.Matrix(body.com)
+        links.append(Link(
+            body=body,
+            parent=position.get(body.parent),
+            k=k,
+            rotates=joint.rotates,
+            axis=axis,
+            R=R.applyfunc(rec.name),
+            d=rec.vec(d),
+            mass=m,
+            h=rec.vec(m * c_vec),
+            I_O=_symmetric(sp.Matrix(body.inertia) + m * _cross_square(c_vec), rec),
+        ))
+    return links
+
+
+def _cross_square(c: Vec) -> sp.Matrix:
+    """[c]^T [c] = (c.c) E - c c^T: the parallel-axes term per unit mass."""
+    return (c.dot(c) * sp.eye(3) - c * c.T).applyfunc(sp.expand)
+
+
+def _symmetric(A: sp.Matrix, rec: Recorder) -> sp.Matrix:
+    """A symmetric matrix with its 6 distinct entries named."""
+    out = sp.zeros(3, 3)
+    for r in range(3):
+        for s in range(r, 3):
+            out[r, s] = out[s, r] = rec.name(sp.expand(A[r, s]))
+    return out
+
+
+def _skew(v: Vec) -> sp.Matrix:
+    return sp.Matrix([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+
+
+def _angular_velocities(links: list[Link], coords: CoordinateSymbols,
+                        rec: Recorder) -> list[Vec]:
+    """w_i = R^T w_parent (+ s qd_i for a rotating joint), in each body's frame."""
+    w: list[Vec] = []
+    for link in links:
+        w_in = ZERO if link.parent is None else link.to_child(w[link.parent], rec)
+        if link.rotates:
+            w_in = rec.vec(w_in + link.axis * coords.qd[link.k])
+        w.append(w_in)
+    return w
+
+
+def _rnea(links: list[Link], coords: CoordinateSymbols, rec: Recorder,
+          w: list[Vec] | None, qdd: list | None, gravity: Vec | None) -> list[sp.Expr]:
+    """The joint forces of the recursive Newton-Euler algorithm.
+
+    Velocities w (None: at rest), accelerations qdd (None: zero) and gravity (None: none)
+    each enter only when given, so the same pass yields the inverse dynamics, the velocity
+    terms and the gravity forces. Forward: accelerations of each frame origin; backward:
+    the force F and moment N (about O_i) that the parent exerts through joint i.
+    """
+    base = ZERO if gravity is None else -gravity
+    alpha: list[Vec] = []
+    acc: list[Vec] = []
+    for i, link in enumerate(links):
+        alpha_in, a_in = _parent_accelerations(link, alpha, acc, w, base, rec)
+        w_in = None
+        if w is not None and link.parent is not None:
+            w_in = link.to_child(w[link.parent], rec)
+        s = link.axis
+        if link.k is not None and link.rotates:
+            if qdd is not None:
+                alpha_in = alpha_in + s * qdd[link.k]
+            if w_in is not None:
+                alpha_in = alpha_in + w_in.cross(s * coords.qd[link.k])
+        elif link.k is not None:
+            if qdd is not None:
+                a_in = a_in + s * qdd[link.k]
+            if w_in is not None:
+                a_in = a_in + 2 * w_in.cross(s * coords.qd[link.k])
+        alpha.append(rec.vec(alpha_in))
+        acc.append(rec.vec(a_in))
+    F = [sp.zeros(3, 1) for _ in links]
+    N = [sp.zeros(3, 1) for _ in links]
+    for i, link in enumerate(links):
+        f, n = _body_wrench(link, alpha[i], acc[i], None if w is None else w[i], rec)
+        F[i], N[i] = F[i] + f, N[i] + n
+    tau: list[sp.Expr] = [sp.Integer(0)] * sum(link.k is not None for link in links)
+    for i in reversed(range(len(links))):
+        link = links[i]
+        F[i], N[i] = rec.vec(F[i]), rec.vec(N[i])
+        if link.k is not None:
+            tau[link.k] = rec.name(link.axis.dot(N[i] if link.rotates else F[i]))
+        if link.parent is not None:
+            f_up = link.to_parent(F[i], rec)
+            F[link.parent] += f_up
+            N[link.parent] += link.to_parent(N[i], rec) + link.d.cross(f_up)
+    return tau
+
+
+def _parent_accelerations(link: Link, alpha: list[Vec], acc: list[Vec], w: list[Vec] | None,
+                          base: Vec, rec: Recorder) -> tuple[Vec, Vec]:
+    """The parent's angular acceleration and the acceleration of the point O_i of the
+    parent, both in this body's frame (before the joint's own contribution)."""
+    if link.parent is None:
+        return ZERO, link.to_child(base, rec)
+    p = link.parent
+    a = acc[p] + alpha[p].cross(link.d)
+    if w is not None:
+        a = a + w[p].cross(rec.vec(w[p].cross(link.d)))
+    return link.to_child(alpha[p], rec), link.to_child(a, rec)
+
+
+def _body_wrench(link: Link, alpha: Vec, a: Vec, w: Vec | None,
+                 rec: Recorder) -> tuple[Vec, Vec]:
+    """The rate of change of a body's momentum: force and moment about O_i.
+
+    f = m a_O + alpha x h + w x (w x h);  n = I_O alpha + w x I_O w + h x a_O.
+    """
+    f = link.mass * a + alpha.cross(link.h)
+    n = link.I_O * alpha + link.h.cross(a)
+    if w is not None and any(e != 0 for e in w):
+        f = f + w.cross(rec.vec(w.cross(link.h)))
+        n = n + w.cross(rec.vec(link.I_O * w))
+    return rec.vec(f), rec.vec(n)
+
+
+def _crba(links: list[Link], n: int, rec: Recorder) -> sp.Matrix:
+    """The mass matrix by the composite-rigid-body algorithm.
+
+    Backward, each body's composite inertia (mass, first moment, inertia about O_i) gathers
+    its children's, moved into its frame. Then for each joint i the composite's momentum
+    for a unit rate of joint i (a spatial force) is carried to each ancestor joint j, where
+    its projection on j's axis is M_ij.
+    """
+    mass = [link.mass for link in links]
+    h = [link.h for link in links]
+    I_O = [link.I_O for link in links]
+    for i in reversed(range(len(links))):
+        link = links[i]
+        mass[i] = rec.name(mass[i])
+        h[i] = rec.vec(h[i])
+        I_O[i] = _symmetric(I_O[i], rec)
+        p = link.parent
+        if p is None:
+            continue
+        h_up = link.to_parent(h[i], rec)
+        I_up = _rotate_inertia(link.R, I_O[i], rec)
+        d = link.d
+        mass[p] = mass[p] + mass[i]
+        h[p] = h[p] + h_up + mass[i] * d
+        # inertia about O_p: I - [h][d] - [d][h] - m [d][d], with h about O_i in p's frame
+        I_O[p] = I_O[p] + I_up - _skew(h_up) * _skew(d) - _skew(d) * _skew(h_up) \
+            - mass[i] * _skew(d) * _skew(d)
+    M = sp.zeros(n, n)
+    for i, link in enumerate(links):
+        if link.k is None:
+            continue
+        s = link.axis
+        if link.rotates:
+            f, m_ = rec.vec(s.cross(h[i])), rec.vec(I_O[i] * s)
+        else:
+            f, m_ = rec.vec(mass[i] * s), rec.vec(h[i].cross(s))
+        M[link.k, link.k] = rec.name(s.dot(m_ if link.rotates else f))
+        j, child = link.parent, link
+        while j is not None:
+            f_up = child.to_parent(f, rec)
+            m_ = rec.vec(child.R * m_ + child.d.cross(f_up))
+            f = f_up
+            ancestor = links[j]
+            if ancestor.k is not None:
+                value = rec.name(ancestor.axis.dot(m_ if ancestor.rotates else f))
+                M[link.k, ancestor.k] = M[ancestor.k, link.k] = value
+            j, child = ancestor.parent, ancestor
+    return M
+
+
+def _rotate_inertia(R: sp.Matrix, I: sp.Matrix, rec: Recorder) -> sp.Matrix:
+    """R I R^T, named: a child's inertia in its parent's axes."""
+    RI = (R * I).applyfunc(rec.name)
+    return _symmetric(RI * R.T, rec)
+
+
+def _energies(links: list[Link], coords: CoordinateSymbols, rec: Recorder, w: list[Vec],
+              gravity: Vec) -> tuple[sp.Expr, sp.Expr]:
+    """Kinetic and potential energy, body by body in body frames.
+
+    T_i = 1/2 m v_O.v_O + v_O.(w x h) + 1/2 w.I_O w; V_i = -g_i.(m p_i + h), where p_i is
+    the world origin's offset to O_i and g_i gravity, both in frame i.
+    """
+    T, V = sp.Integer(0), sp.Integer(0)
+    v: list[Vec] = []
+    p: list[Vec] = []
+    g: list[Vec] = []
+    for i, link in enumerate(links):
+        if link.parent is None:
+            v_in, p_in, g_in = ZERO, link.to_child(link.d, rec), link.to_child(gravity, rec)
+        else:
+            j = link.parent
+            v_in = link.to_child(v[j] + w[j].cross(link.d), rec)
+            p_in = link.to_child(p[j] + link.d, rec)
+            g_in = link.to_child(g[j], rec)
+        if link.k is not None and not link.rotates:
+            v_in = rec.vec(v_in + link.axis * coords.qd[link.k])
+        v.append(v_in)
+        p.append(p_in)
+        g.append(g_in)
+        wi = w[i]
+        T_i = link.mass * v_in.dot(v_in) / 2 + v_in.dot(wi.cross(link.h)) \
+            + wi.dot(link.I_O * wi) / 2
+        T += rec.name(T_i)
+        V += rec.name(-g_in.dot(link.mass * p_in + link.h))
+    return T, V
