@@ -22,6 +22,7 @@ from pathlib import Path
 import sympy as sp
 
 from gagen.build import builder
+from gagen.errors import ModelError
 from gagen.model.resolve import resolve_model
 from gagen.symbolic.gibbs_appell import derive
 from gagen.symbolic.recursive import derive_recursive
@@ -93,7 +94,7 @@ def main(argv=None) -> None:
     for name in args.models:
         try:
             model = resolve_model(name)
-        except Exception as exc:  # a URDF that does not load is reported, not fatal
+        except (ModelError, OSError) as exc:  # a URDF that does not load is reported
             print(f"| {label(name)} | does not load: {exc} |")
             continue
         old = old_derivation(name, args.old_timeout)
