@@ -19,6 +19,11 @@ vector v of the parent's frame is R^T v in the child's. Spatial quantities are t
 about the body frame's origin O_i: a body's inertia there is (m, h = m c, I_O) with
 I_O = I_C + m [c]^T [c] (parallel axes). Gravity enters the RNEA as an acceleration
 -g of the world frame.
+
+The inverse dynamics is its own full RNEA pass (velocities, qdd and gravity together), so
+the generated inverse_dynamics needs no M, b or g; the three passes share the joint
+transforms and the angular velocities. Forward dynamics is still M \\ forcing (the
+codegen's unrolled LDL^T); an articulated-body pass would be the next step.
 """
 
 from __future__ import annotations
