@@ -114,21 +114,21 @@ def build_key(src_key: str, flags: list[str]) -> str:
 
 
 def default_cache_dir() -> Path:
-    """$GAGEN_CACHE_DIR, else the user's cache folder ($XDG_CACHE_HOME or ~/.cache)/gagen.
+    """$GAGEN_CACHE_DIR, else the platform's user cache folder for gagen (platformdirs:
+    $XDG_CACHE_HOME/gagen or ~/.cache/gagen on Linux, ~/Library/Caches/gagen on macOS,
+    %LOCALAPPDATA%\\gagen\\Cache on Windows).
 
-    An empty or relative $XDG_CACHE_HOME is ignored, as the XDG specification says: the cache
-    never lands relative to the working directory.
+    A relative folder from the platform's settings (e.g. a relative $XDG_CACHE_HOME, which
+    the XDG specification says to ignore) gives way to ~/.cache/gagen: the cache never lands
+    relative to the working directory.
     """
     env = os.environ.get("GAGEN_CACHE_DIR", "").strip()
     if env:
         return Path(env).expanduser()
-    if sys.platform == "darwin":
-        return Path.home() / "Library" / "Caches" / "gagen"
-    if os.name == "nt":
-        return Path(os.environ.get("LOCALAPPDATA") or Path.home()) / "gagen" / "Cache"
-    xdg = os.environ.get("XDG_CACHE_HOME", "").strip()
-    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".cache"
-    return base / "gagen"
+    import platformdirs
+
+    folder = Path(platformdirs.user_cache_dir("gagen", appauthor=False))
+    return folder if folder.is_absolute() else Path.home() / ".cache" / "gagen"
 
 
 class CacheWarning(UserWarning):
@@ -137,20 +137,25 @@ class CacheWarning(UserWarning):
 
 
 class Progress:
-    """Prints each stage and its time when verbose."""
+    """Logs each stage and its time at INFO (logger gagen.build.builder); `verbose` shows
+    them on stderr for this build (gagen.diagnostics.showing_progress)."""
 
     def __init__(self, report: BuildReport, verbose: bool):
         self.report, self.verbose = report, verbose
 
     def stage(self, name: str, seconds: float, detail: str = "") -> None:
         self.report.stages[name] = seconds
-        if self.verbose:
-            extra = f"  {detail}" if detail else ""
-            print(f"gagen: {name:<9} {seconds:7.2f} s{extra}", file=sys.stderr, flush=True)
+        extra = f"  {detail}" if detail else ""
+        self.say(f"{name:<9} {seconds:7.2f} s{extra}")
 
     def say(self, text: str) -> None:
-        if self.verbose:
-            print(f"gagen: {text}", file=sys.stderr, flush=True)
+        # imported here: a cached load never builds, and never pays for importing logging
+        import logging
+
+        from ..diagnostics import showing_progress
+
+        with showing_progress(self.verbose):
+            logging.getLogger(__name__).info(text)
 
 
 def generate_sources(model: Model, folder: Path, progress: Progress | None = None,
@@ -500,7 +505,7 @@ def load_compiled(model: Model, cache_dir: Path | None = None, fast_math: bool =
     module = shipped_module(model, fast_math, portable)
     if module is None:
         options = {"cache_dir": cache_dir, "fast_math": fast_math, "portable": portable,
-                       "verbose": True if verbose is None else verbose}
+                       "verbose": bool(verbose)}
         path, report = build(model, **options)
         try:
             module = import_extension(path, report.module_name)
