@@ -39,36 +39,24 @@ class StderrHandler(logging.StreamHandler):
 def showing_progress(enabled: bool = True, level: int = logging.INFO) -> Iterator[None]:
     """Within the block, show gagen's records of `level` and above on stderr.
 
-    Does nothing when not `enabled`, when a StderrHandler is already attached (the command
-    line's, or an enclosing call's: the outermost caller, e.g. the command line's --quiet,
-    decides), or when the application's own logging already handles these records. In the
-    block, gagen's records stop at this handler, so that they are not shown twice (e.g.
-    once more by a `logging.basicConfig()` handler at the root).
+    Does nothing when not `enabled`, or when a StderrHandler is already attached (the
+    command line's, or an enclosing call's): the outermost caller decides, e.g. the command
+    line's --quiet (level WARNING) wins over a `verbose=True` inside. In the block, gagen's
+    records stop at this handler (they do not propagate to the root logger), so that an
+    application's `logging.basicConfig()` does not show them a second time.
     """
     logger = logging.getLogger(LOGGER_NAME)
-    already_shown = logger.isEnabledFor(level) and _handled(logger)
-    if (not enabled or already_shown
-            or any(isinstance(h, StderrHandler) for h in logger.handlers)):
+    if not enabled or any(isinstance(h, StderrHandler) for h in logger.handlers):
         yield
         return
     handler = StderrHandler(level)
-    saved = logger.level, logger.propagate
-    logger.setLevel(min(level, logger.getEffectiveLevel()))
+    saved_level, saved_propagate = logger.level, logger.propagate
+    logger.setLevel(level)
     logger.propagate = False
     logger.addHandler(handler)
     try:
         yield
     finally:
         logger.removeHandler(handler)
-        logger.setLevel(saved[0])
-        logger.propagate = saved[1]
-
-
-def _handled(logger: logging.Logger) -> bool:
-    """Whether a handler other than a NullHandler receives the logger's records."""
-    current: logging.Logger | None = logger
-    while current is not None:
-        if any(not isinstance(h, logging.NullHandler) for h in current.handlers):
-            return True
-        current = current.parent if current.propagate else None
-    return False
+        logger.setLevel(saved_level)
+        logger.propagate = saved_propagate
