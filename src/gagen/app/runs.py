@@ -27,10 +27,14 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..sim.simulate import COMPILED_METHODS
+from ..sim.simulate import COMPILED_METHODS, SimulationResult
+
+if TYPE_CHECKING:
+    from ..model.model import Model
 
 log = logging.getLogger(__name__)
 
@@ -39,10 +43,10 @@ log = logging.getLogger(__name__)
 class SimulateRun:
     """What `run_simulate` computed and wrote."""
 
-    model: object
+    model: Model
     backend: str
     method: str
-    result: object  # gagen.SimulationResult
+    result: SimulationResult
     files: list[Path] = field(default_factory=list)
 
 
@@ -50,7 +54,7 @@ class SimulateRun:
 class InverseRun:
     """What `run_inverse` computed and wrote: eq. 11 sampled at t, and the torques tau."""
 
-    model: object
+    model: Model
     t: np.ndarray
     q: np.ndarray
     qd: np.ndarray
