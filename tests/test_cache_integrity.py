@@ -165,3 +165,28 @@ def test_a_missing_compiler_is_a_clear_error(monkeypatch, tmp_path):
     monkeypatch.setenv("CC", "no-such-compiler-gagen")
     with pytest.raises(gagen.BuildError, match="no C compiler found"):
         builder.check_compiler()
+
+
+# ------------------------------------------------------------------ where the cache is
+
+
+def test_gagen_cache_dir_overrides_the_platform_folder(monkeypatch, tmp_path):
+    monkeypatch.setenv("GAGEN_CACHE_DIR", str(tmp_path / "mine"))
+    assert builder.default_cache_dir() == tmp_path / "mine"
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="XDG_CACHE_HOME is the Linux convention")
+@pytest.mark.parametrize("xdg", ["", "  ", "relative/cache", "."])
+def test_the_cache_never_lands_relative_to_the_working_directory(monkeypatch, tmp_path, xdg):
+    monkeypatch.delenv("GAGEN_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", xdg)
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.chdir(tmp_path)
+    assert builder.default_cache_dir() == tmp_path / "home" / ".cache" / "gagen"
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="XDG_CACHE_HOME is the Linux convention")
+def test_the_platform_folder_follows_xdg_cache_home(monkeypatch, tmp_path):
+    monkeypatch.delenv("GAGEN_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert builder.default_cache_dir() == tmp_path / "xdg" / "gagen"

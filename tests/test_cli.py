@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import argparse
+import logging
+import os
 import re
+import subprocess
+import sys
 
 import pytest
 from conftest import REPO
 
-from gagen.app.cli import main, parser
+from gagen.app.cli import COMMANDS, _flat, main, parser
+from gagen.diagnostics import showing_progress
 
 
 @pytest.mark.parametrize("command", ["build", "info", "simulate", "inverse", "paper", "bench"])
@@ -72,3 +78,105 @@ def test_readme_python_examples_run(cache_dir, monkeypatch, tmp_path):
         exec(compile(block, "README.md", "exec"), namespace)  # noqa: S102 (our own README)
     assert (tmp_path / "run.csv").exists()
     assert namespace["tau"].shape == (501, 3)
+
+
+# ------------------------------------------------------------ registry and arguments
+
+
+def test_one_registry_names_every_command_of_the_parser():
+    sub = next(a for a in parser()._actions if isinstance(a, argparse._SubParsersAction))
+    assert list(sub.choices) == list(COMMANDS)
+    assert all(callable(command.run) for command in COMMANDS.values())
+
+
+def test_app_modules_do_not_import_the_command_line():
+    """paper.py and runs.py are jobs the command line calls, never the other way round."""
+    for name in ("paper.py", "runs.py", "figures.py"):
+        text = (REPO / "src" / "gagen" / "app" / name).read_text()
+        assert "from .cli" not in text and "gagen.app.cli" not in text, name
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["--target", "-60", "-60", "-30"], [-60.0, -60.0, -30.0]),
+    (["--target=-60,-60,-30"], [-60.0, -60.0, -30.0]),  # the older comma form
+    (["--target", "-1.5"], [-1.5]),
+    (["--target", ".5", "-.25", "7"], [0.5, -0.25, 7.0]),
+])
+def test_lists_are_numbers_after_their_option_negative_ones_included(argv, expected):
+    args = parser().parse_args(["simulate", "rrr", *argv, "--kp", "500", "300", "200"])
+    assert args.model == "rrr"
+    assert _flat(args.target) == expected
+    assert _flat(args.kp) == [500.0, 300.0, 200.0] and args.kd is None
+
+
+@pytest.mark.parametrize("bad", [["--qf", "-60", "x"], ["--qf", "nan"], ["--qf"],
+                                 ["--qf", "1,,inf"]])
+def test_a_list_with_something_else_than_finite_numbers_is_a_usage_error(bad, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        parser().parse_args(["inverse", "rrr", *bad])
+    assert exit_.value.code == 2
+    assert "--qf" in capsys.readouterr().err
+
+
+def test_quiet_is_accepted_before_and_after_the_command():
+    assert parser().parse_args(["-q", "info"]).quiet
+    assert parser().parse_args(["info", "--quiet"]).quiet
+    assert not parser().parse_args(["info"]).quiet
+
+
+# ------------------------------------------------------------------- diagnostics
+
+
+def test_progress_goes_to_stderr_unless_quiet(tmp_path, cache_dir, capsys):
+    argv = ["inverse", "rrr", "--points", "5", "--out", str(tmp_path), "--cache-dir",
+            str(cache_dir)]
+    assert main(argv) == 0
+    shown = capsys.readouterr()
+    assert "gagen: loading 'rrr'" in shown.err and "gagen: plotting..." in shown.err
+    assert "loading" not in shown.out and "peak T12x" in shown.out
+    assert main([*argv, "--quiet"]) == 0
+    quiet = capsys.readouterr()
+    assert quiet.err == "" and "peak T12x" in quiet.out
+
+
+def _progress(verbose: bool):
+    from gagen.build.builder import BuildReport, Progress
+
+    return Progress(BuildReport("m", "m_mod", REPO), verbose)
+
+
+def test_library_progress_is_logged_and_quiet_by_default(capsys, caplog):
+    with caplog.at_level(logging.INFO, logger="gagen"):
+        _progress(False).stage("derive", 1.25, "3 coordinates")
+    assert capsys.readouterr().err == ""
+    [record] = caplog.records
+    assert record.name == "gagen.build.builder" and record.levelno == logging.INFO
+    assert record.getMessage() == "derive       1.25 s  3 coordinates"
+
+
+def test_verbose_shows_progress_once_and_the_command_line_decides(capsys):
+    _progress(True).say("compiling")
+    assert capsys.readouterr().err == "gagen: compiling\n"
+    with showing_progress():  # the command line's handler: verbose adds no second line
+        _progress(True).say("compiling")
+    assert capsys.readouterr().err == "gagen: compiling\n"
+    with showing_progress(level=logging.WARNING):  # --quiet wins over verbose
+        _progress(True).say("compiling")
+    assert capsys.readouterr().err == ""
+    assert not logging.getLogger("gagen").handlers  # nothing left attached
+
+
+def test_figures_leave_matplotlib_s_backend_alone(tmp_path):
+    code = (
+        "import matplotlib, numpy as np\n"
+        "matplotlib.use('pdf')\n"
+        "from gagen.app.figures import fig2_positions\n"
+        "import sys\n"
+        f"fig2_positions(np.linspace(0, 1, 5), np.zeros((5, 2)), path={str(tmp_path)!r} + '/f.png')\n"
+        "assert matplotlib.get_backend() == 'pdf', matplotlib.get_backend()\n"
+        "assert 'matplotlib.pyplot' not in sys.modules\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env={**os.environ, "MPLBACKEND": ""}, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "f.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

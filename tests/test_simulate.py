@@ -440,12 +440,12 @@ def test_cli_simulate_writes_its_files(sim_cache, tmp_path, capsys):
 def test_cli_simulate_scipy_method_and_options(sim_cache, tmp_path):
     out = tmp_path / "sim"
     code = main(["simulate", "rrr", "--duration", "0.2", "--method", "RK45", "--out", str(out),
-                 "--cache-dir", str(sim_cache), "--target=-10,-10,-10", "--kp", "200"])
+                 "--cache-dir", str(sim_cache), "--target", "-10", "-10", "-10", "--kp", "200"])
     assert code == 0
     data = np.loadtxt(out / "simulate.csv", delimiter=",", skiprows=1)
     assert data.shape == (501, 10)
     assert main(["simulate", "--duration", "0.2", "--out", str(out), "--backend", "lambdify",
-                 "--method", "rk4"]) == 1
+                 "--method", "rk4"]) == 2  # bad input, refused before loading anything
 
 
 def test_cli_inverse_writes_its_files(sim_cache, tmp_path, capsys):

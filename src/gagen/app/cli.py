@@ -1,30 +1,196 @@
-"""Command line: `python -m gagen <command>`; each command module registers its own parser."""
+"""Command line: `python -m gagen <command>`; one parser and one registry of commands.
+
+Each command is a function of the parsed arguments that calls gagen's functions with
+values (`COMMANDS`). Results go to stdout; progress (build stages, loading, plotting) is
+logged by gagen's modules at INFO and shown on stderr as `gagen: <message>` lines, unless
+--quiet.
+"""
 
 from __future__ import annotations
 
 import argparse
+import logging
+import math
 import sys
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 from .. import __version__
-from ..errors import ModelError
+from ..bench import DESCRIPTION as BENCH_DESCRIPTION
+from ..errors import ModelError, NonFiniteStateError
+from ..sim.simulate import COMPILED_METHODS, SCIPY_METHODS
 
 MODEL_HELP = ("built-in name (rrr, chain:N), model file (.yaml, .yml, .json) or .urdf "
               "(default: rrr, the paper's robot)")
 
 
-def add_model_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("model", nargs="?", default="rrr", help=MODEL_HELP)
+# ------------------------------------------------------------------- argument types
 
 
-def add_cache_dir_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--cache-dir", metavar="DIR",
-                        help="cache of compiled models (default: $GAGEN_CACHE_DIR or "
-                        "~/.cache/gagen)")
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got '{text}'")
+    return value
 
 
-def _build(args: argparse.Namespace) -> int:
+def _positive(text: str) -> float:
+    value = _finite(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got '{text}'")
+    return value
+
+
+def _nonnegative(text: str) -> float:
+    value = _finite(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got '{text}'")
+    return value
+
+
+def _sample_count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
+    if not 2 <= value <= 10_000_000:
+        raise argparse.ArgumentTypeError(f"expected 2 to 10,000,000 samples, got {value}")
+    return value
+
+
+def _numbers(text: str) -> list[float]:
+    """One finite number, or several separated by commas (the older `--target=-60,-60,-30`)."""
+    parts = [part for part in text.replace(" ", "").split(",") if part]
+    if not parts:
+        raise argparse.ArgumentTypeError(f"expected a number, got '{text}'")
+    return [_finite(part) for part in parts]
+
+
+def _flat(groups: list[list[float]] | None) -> list[float] | None:
+    """The numbers of a `nargs="+"` list of `_numbers`, in order (None stays None)."""
+    return None if groups is None else [v for group in groups for v in group]
+
+
+def _add_numbers(p: argparse.ArgumentParser, flag: str, help: str, example: str) -> None:
+    p.add_argument(flag, nargs="+", type=_numbers, metavar="V",
+                   help=f"{help}, e.g. {flag} {example} (default: see above)")
+
+
+# ------------------------------------------------------------------------ arguments
+
+
+def _add_model(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", nargs="?", default="rrr", help=MODEL_HELP)
+
+
+def _add_cache_dir(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--cache-dir", metavar="DIR",
+                   help="cache of compiled models (default: $GAGEN_CACHE_DIR, else the "
+                   "user's cache folder, e.g. ~/.cache/gagen)")
+
+
+def _build_arguments(p: argparse.ArgumentParser) -> None:
+    _add_model(p)
+    p.add_argument("--out", metavar="DIR",
+                   help="write sources and module here (default for rrr: generated/rrr; "
+                   "other models: the cache)")
+    _add_cache_dir(p)
+    p.add_argument("--fast-math", action="store_true",
+                   help="compile with -ffast-math (off by default: it may reorder floating point)")
+
+
+def _info_arguments(p: argparse.ArgumentParser) -> None:
+    _add_model(p)
+
+
+def _run_arguments(p: argparse.ArgumentParser, what: str) -> None:
+    """What `simulate` and `inverse` share."""
+    _add_model(p)
+    p.add_argument("--duration", type=_positive, default=5.0, metavar="S",
+                   help=f"{what} in seconds (default: %(default)s, as in the paper)")
+    p.add_argument("--points", type=_sample_count, default=501, metavar="N",
+                   help="output samples, evenly spaced (default: %(default)s)")
+    p.add_argument("--out", metavar="DIR",
+                   help="output folder (default: out/<model name>, e.g. out/rrr)")
+    p.add_argument("--backend", choices=("compiled", "lambdify"), default="compiled",
+                   help="equations of motion as compiled C or through sympy.lambdify "
+                   "(default: %(default)s)")
+    _add_cache_dir(p)
+
+
+def _simulate_arguments(p: argparse.ArgumentParser) -> None:
+    _run_arguments(p, "simulated time")
+    p.add_argument("--method", choices=COMPILED_METHODS + SCIPY_METHODS, default=None,
+                   help="dopri5 or rk4: gagen's C integrators (compiled backend; dopri5 takes "
+                   "the same steps as scipy's RK45, the paper's ode45); or any "
+                   "scipy.integrate.solve_ivp method (default: dopri5 with the compiled "
+                   "backend, RK45 with lambdify)")
+    p.add_argument("--rtol", type=_positive, default=1e-6,
+                   help="relative tolerance (default: %(default)s)")
+    p.add_argument("--atol", type=_nonnegative, default=1e-8,
+                   help="absolute tolerance (default: %(default)s)")
+    p.add_argument("--step", type=_positive, default=1e-3, metavar="H",
+                   help="fixed step of rk4 in seconds (default: %(default)s)")
+    _add_numbers(p, "--target", "PD target, degrees (metres for prismatic joints), one value "
+                 "or one per coordinate", "-60 -60 -30")
+    _add_numbers(p, "--kp", "proportional gains, one value or one per coordinate",
+                 "500 300 200")
+    _add_numbers(p, "--kd", "derivative gains, one value or one per coordinate",
+                 "300 150 100")
+    p.add_argument("--no-gravity-compensation", action="store_true",
+                   help="leave out the gravity torque g(q) of the PD law")
+    p.add_argument("--gif", action="store_true",
+                   help="also write arm.gif, an animation of the arm (a few seconds)")
+
+
+def _inverse_arguments(p: argparse.ArgumentParser) -> None:
+    _run_arguments(p, "motion time Tp")
+    _add_numbers(p, "--qf", "final position, degrees (metres for prismatic joints), one value "
+                 "or one per coordinate", "-60 -60 -30")
+
+
+def _paper_arguments(p: argparse.ArgumentParser) -> None:
+    from .paper import DEFAULT_OUT
+
+    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
+                   help="output folder (default: %(default)s)")
+    p.add_argument("--gif", action="store_true", help="also write an animation, arm.gif")
+    _add_cache_dir(p)
+
+
+def _bench_arguments(p: argparse.ArgumentParser) -> None:
+    from ..bench.run import SECTIONS
+
+    p.add_argument("--out", default="bench-out", metavar="DIR",
+                   help="output folder for report.md, results.json and the plots "
+                   "(default: %(default)s)")
+    p.add_argument("--full", action="store_true",
+                   help="the complete study: chain:2 ... chain:12, UR5 and Panda")
+    p.add_argument("--urdf-dir", metavar="DIR",
+                   help="folder holding ur5_robot.urdf and panda.urdf (default: "
+                   "$GAGEN_URDF_DIR, else ../shared/urdf next to the repository)")
+    p.add_argument("--cache-dir", metavar="DIR",
+                   help="where rrr is built for the per-call, batched and simulation "
+                   "sections (default: a fresh temporary folder; the scaling study always "
+                   "builds cold in one)")
+    p.add_argument("--only", nargs="+", choices=SECTIONS, metavar="SECTION",
+                   help=f"run only these sections ({', '.join(SECTIONS)})")
+    p.add_argument("--models", nargs="+", metavar="MODEL",
+                   help="models of the scaling study instead of the mode's list "
+                   "(built-in names, model files, URDFs)")
+    p.add_argument("--smoke", action="store_true", help=argparse.SUPPRESS)
+
+
+# ------------------------------------------------------------------------- commands
+
+
+def build_command(args: argparse.Namespace) -> int:
+    """Derive, generate and compile a model; print what was done."""
     from ..build.builder import build
     from ..model.resolve import resolve_model
 
@@ -32,8 +198,7 @@ def _build(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else (Path("generated") / model.name if args.model == "rrr"
                                            else None)
     start = time.perf_counter()
-    path, report = build(model, out=out, cache_dir=args.cache_dir, fast_math=args.fast_math,
-                         verbose=True)
+    path, report = build(model, out=out, cache_dir=args.cache_dir, fast_math=args.fast_math)
     total = time.perf_counter() - start
     if report.cached:
         print(f"gagen: '{model.name}' is up to date in the cache")
@@ -43,7 +208,8 @@ def _build(args: argparse.Namespace) -> int:
     return 0
 
 
-def _info(args: argparse.Namespace) -> int:
+def info_command(args: argparse.Namespace) -> int:
+    """A model's coordinates and parameters."""
     from ..model.resolve import resolve_model
 
     model = resolve_model(args.model)
@@ -58,7 +224,108 @@ def _info(args: argparse.Namespace) -> int:
     return 0
 
 
+def simulate_command(args: argparse.Namespace) -> int:
+    """Direct dynamics under a PD law (gagen.app.runs.run_simulate)."""
+    from .runs import print_simulate_report, run_simulate
+
+    run = run_simulate(args.model, duration=args.duration, points=args.points, out=args.out,
+                       backend=args.backend, cache_dir=args.cache_dir, method=args.method,
+                       rtol=args.rtol, atol=args.atol, step=args.step,
+                       target=_flat(args.target), kp=_flat(args.kp), kd=_flat(args.kd),
+                       gravity_compensation=not args.no_gravity_compensation, gif=args.gif)
+    print_simulate_report(run)
+    return 0
+
+
+def inverse_command(args: argparse.Namespace) -> int:
+    """Inverse dynamics along eq. 11 (gagen.app.runs.run_inverse)."""
+    from .runs import print_inverse_report, run_inverse
+
+    run = run_inverse(args.model, duration=args.duration, points=args.points, out=args.out,
+                      backend=args.backend, cache_dir=args.cache_dir, qf=_flat(args.qf))
+    print_inverse_report(run)
+    return 0
+
+
+def paper_command(args: argparse.Namespace) -> int:
+    """The paper's reproduction (gagen.app.paper.reproduce_paper)."""
+    from .paper import reproduce_paper
+
+    reproduce_paper(args.out, gif=args.gif, cache_dir=args.cache_dir)
+    return 0
+
+
+def bench_command(args: argparse.Namespace) -> int:
+    """The benchmark suite (gagen.bench.run.run); 0 if every section worked."""
+    from ..bench.run import run
+
+    mode = "smoke" if args.smoke else ("full" if args.full else "default")
+    command = "python -m gagen bench --out " + str(args.out) + (
+        " --full" if args.full else "") + (" --smoke" if args.smoke else "")
+    return run(out=Path(args.out), mode=mode, urdf_dir=args.urdf_dir, cache_dir=args.cache_dir,
+               sections=args.only, scaling_models=args.models, command=command)
+
+
+@dataclass(frozen=True)
+class Command:
+    """A command of the command line: its function and its parser's texts and arguments."""
+
+    run: Callable[[argparse.Namespace], int]
+    help: str
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    description: str | None = None
+    preformatted: bool = False  # the description keeps its line breaks
+
+
+SIMULATE_DESCRIPTION = (
+    "Direct dynamics: the arm starts at rest at q = 0 and a PD law with gravity\n"
+    "compensation drives it for --duration seconds.\n\n"
+    "  rrr:    paper_controller(): target (-60, -60, -30) deg, kp = (500, 300, 200) N m/rad,\n"
+    "          kd = (300, 150, 100) N m s/rad (the paper's Fig. 2 and 3)\n"
+    "  others: target -30 deg per revolute joint, 0.05 m per prismatic joint (clipped\n"
+    "          into the joint limits); kp = 16 I_i, kd = 8 I_i, I_i the largest M_ii at\n"
+    "          q = 0, half-way and at the target\n\n"
+    "Writes simulate.csv (t, q, qd, tau; SI units, radians), fig2_positions.png, "
+    "fig3_arm.png\nand, with --gif, arm.gif into --out. Put MODEL before the lists "
+    "(--target, --kp, --kd).")
+
+INVERSE_DESCRIPTION = (
+    "Inverse dynamics: the torques that move the arm along eq. 11,\n"
+    "  q(t) = q0 + (qf - q0)/Tp (t - Tp/(2 pi) sin(2 pi t/Tp)),  0 <= t <= Tp,\n"
+    "from rest at q0 = 0 to rest at qf. Default qf: rrr (-60, -60, -30) deg, as in the paper;\n"
+    "other models -30 deg per revolute joint, 0.05 m per prismatic joint (clipped into\n"
+    "the joint limits). Writes inverse.csv (t, q, qd, qdd, tau) and fig4_inverse.png into\n"
+    "--out and prints the peak torques. Put MODEL before --qf.")
+
+COMMANDS: dict[str, Command] = {
+    "build": Command(
+        build_command, "derive, generate C and compile a model", _build_arguments,
+        "Derive the Gibbs-Appell equations, generate C with CSE and compile it through "
+        "Cython. Shows each stage with its time and prints the operation counts before and "
+        "after CSE."),
+    "info": Command(info_command, "show a model's coordinates and parameters", _info_arguments),
+    "simulate": Command(simulate_command,
+                        "direct dynamics under feedback: the paper's Fig. 2 and 3",
+                        _simulate_arguments, SIMULATE_DESCRIPTION, preformatted=True),
+    "inverse": Command(inverse_command, "inverse dynamics along eq. 11: the paper's Fig. 4",
+                       _inverse_arguments, INVERSE_DESCRIPTION, preformatted=True),
+    "paper": Command(
+        paper_command,
+        "reproduce the paper: Fig. 2, 3 (direct) and Fig. 4 (inverse dynamics)",
+        _paper_arguments,
+        "Runs `simulate rrr` and `inverse rrr` with the paper's settings and compares the "
+        "results with the paper's figures."),
+    "bench": Command(bench_command,
+                     "benchmarks: per call, batched, simulation, scaling; writes report.md",
+                     _bench_arguments, BENCH_DESCRIPTION, preformatted=True),
+}
+
+
+# --------------------------------------------------------------------------- parser
+
+
 def parser() -> argparse.ArgumentParser:
+    """The whole command line: every command of COMMANDS with its arguments."""
     top = argparse.ArgumentParser(
         prog="python -m gagen",
         description="Compiled Gibbs-Appell equations of motion for trees of rigid bodies.",
@@ -66,36 +333,23 @@ def parser() -> argparse.ArgumentParser:
     top.add_argument("--version", action="version", version=f"gagen {__version__}")
     top.add_argument("--traceback", action="store_true",
                      help="on an error, show Python's traceback instead of one line")
+    top.add_argument("-q", "--quiet", action="store_true",
+                     help="show no progress on stderr (results and errors only)")
+    # the same option after the command; SUPPRESS keeps a subparser from resetting it
+    quiet = argparse.ArgumentParser(add_help=False)
+    quiet.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                       help="show no progress on stderr (results and errors only)")
     sub = top.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
-    p = sub.add_parser("build", help="derive, generate C and compile a model",
-                       description="Derive the Gibbs-Appell equations, generate C with CSE and "
-                       "compile it through Cython. Prints each stage with its time and the "
-                       "operation counts before and after CSE.")
-    add_model_argument(p)
-    p.add_argument("--out", metavar="DIR",
-                   help="write sources and module here (default for rrr: generated/rrr; "
-                   "other models: the cache)")
-    add_cache_dir_argument(p)
-    p.add_argument("--fast-math", action="store_true",
-                   help="compile with -ffast-math (off by default: it may reorder floating point)")
-    p.set_defaults(run=_build)
-
-    p = sub.add_parser("info", help="show a model's coordinates and parameters")
-    add_model_argument(p)
-    p.set_defaults(run=_info)
-
-    for register in _command_modules():
-        register(sub)
+    for name, command in COMMANDS.items():
+        p = sub.add_parser(name, help=command.help, description=command.description,
+                           parents=[quiet],
+                           formatter_class=(argparse.RawDescriptionHelpFormatter
+                                            if command.preformatted else argparse.HelpFormatter))
+        command.add_arguments(p)
     return top
 
 
-def _command_modules():
-    """Further commands, each module registering its subparsers."""
-    from ..bench import register as register_bench
-    from .paper import register as register_paper
-
-    return [register_paper, register_bench]
+# ---------------------------------------------------------------------------- main
 
 
 # What a user can cause, and the exit code each gets: bad input (2) or a run that failed (1).
@@ -104,7 +358,8 @@ def _exit_code(exc: BaseException) -> int | None:
     from ..build.builder import BuildError
     from ..runtime.dynamics import SingularMassMatrixError
 
-    if isinstance(exc, (BuildError, SingularMassMatrixError, OSError, RuntimeError)):
+    if isinstance(exc, (BuildError, SingularMassMatrixError, NonFiniteStateError, OSError,
+                        RuntimeError)):
         return 1
     if isinstance(exc, (ModelError, ValueError, TypeError, KeyError)):
         return 2
@@ -112,10 +367,16 @@ def _exit_code(exc: BaseException) -> int | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one command; a user's error prints one line `gagen: error: ...` (exit 1 or 2)."""
+    """Run one command; a user's error prints one line `gagen: error: ...` (exit 1 or 2).
+
+    Progress is shown on stderr while the command runs (gagen.diagnostics), unless --quiet.
+    """
+    from ..diagnostics import showing_progress
+
     args = parser().parse_args(argv)
     try:
-        return args.run(args)
+        with showing_progress(level=logging.WARNING if args.quiet else logging.INFO):
+            return COMMANDS[args.command].run(args)
     except KeyboardInterrupt:
         print("gagen: interrupted", file=sys.stderr)
         return 130

@@ -1,8 +1,9 @@
 """The paper's figures: Fig. 2 (coordinates), Fig. 3 (arm positions), Fig. 4 (inverse dynamics).
 
-Figures are drawn off screen with matplotlib's Agg backend (selected before pyplot is ever
-imported; gagen itself draws on `matplotlib.figure.Figure` objects with an Agg canvas, so
-it never opens a window, never calls plt.show and leaves no figures in pyplot's registry).
+Figures are drawn off screen on `matplotlib.figure.Figure` objects, each with its own Agg
+canvas: gagen never selects matplotlib's global backend (an application's choice stays
+its own), never imports pyplot, never opens a window and leaves no figures in pyplot's
+registry.
 Each `fig*` function saves to `path` and returns it, or returns the Figure if path is None.
 
 Positions of the arm come from `arm_points`: the paper's closed-form geometry for `rrr`
@@ -14,14 +15,8 @@ centre offset for every leaf body) at the model's parameters.
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass
 from pathlib import Path
-
-import matplotlib
-
-if "matplotlib.pyplot" not in sys.modules:
-    matplotlib.use("Agg")
 
 import numpy as np
 import sympy as sp

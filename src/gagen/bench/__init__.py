@@ -5,13 +5,11 @@ and plain SymPy versions of the same robot), `percall`, `batched`, `simulation`,
 `scaling`, `report` (report.md and PNG plots) and `run` (the whole suite). Pinocchio and
 PyDy are optional (`pip install gagen[bench]`); without them their rows are skipped.
 
-This module only registers the command: the measurement code is imported when it runs.
+This module holds only the command's description (gagen.app.cli parses the command line);
+the measurement code is imported when it runs.
 """
 
 from __future__ import annotations
-
-import argparse
-from pathlib import Path
 
 DESCRIPTION = """\
 Reproducible benchmarks of gagen, written to --out as report.md (machine, method, tables),
@@ -31,42 +29,3 @@ against Pinocchio per call (tens of minutes).
 
 Candidates are timed interleaved (round-robin over the repeats); reported are medians,
 interquartile ranges and ratios to a baseline."""
-
-
-def _bench(args: argparse.Namespace) -> int:
-    from .run import run
-
-    mode = "smoke" if args.smoke else ("full" if args.full else "default")
-    command = "python -m gagen bench --out " + str(args.out) + (
-        " --full" if args.full else "") + (" --smoke" if args.smoke else "")
-    return run(out=Path(args.out), mode=mode, urdf_dir=args.urdf_dir, cache_dir=args.cache_dir,
-               sections=args.only, scaling_models=args.models, command=command)
-
-
-def register(subparsers) -> None:
-    """Add the `bench` command to gagen's command line."""
-    from .run import SECTIONS
-
-    p = subparsers.add_parser("bench", help="benchmarks: per call, batched, simulation, "
-                              "scaling; writes report.md",
-                              formatter_class=argparse.RawDescriptionHelpFormatter,
-                              description=DESCRIPTION)
-    p.add_argument("--out", default="bench-out", metavar="DIR",
-                   help="output folder for report.md, results.json and the plots "
-                   "(default: %(default)s)")
-    p.add_argument("--full", action="store_true",
-                   help="the complete study: chain:2 ... chain:12, UR5 and Panda")
-    p.add_argument("--urdf-dir", metavar="DIR",
-                   help="folder holding ur5_robot.urdf and panda.urdf (default: "
-                   "$GAGEN_URDF_DIR, else ../shared/urdf next to the repository)")
-    p.add_argument("--cache-dir", metavar="DIR",
-                   help="where rrr is built for the per-call, batched and simulation "
-                   "sections (default: a fresh temporary folder; the scaling study always "
-                   "builds cold in one)")
-    p.add_argument("--only", nargs="+", choices=SECTIONS, metavar="SECTION",
-                   help=f"run only these sections ({', '.join(SECTIONS)})")
-    p.add_argument("--models", nargs="+", metavar="MODEL",
-                   help="models of the scaling study instead of the mode's list "
-                   "(built-in names, model files, URDFs)")
-    p.add_argument("--smoke", action="store_true", help=argparse.SUPPRESS)
-    p.set_defaults(run=_bench)

@@ -199,24 +199,25 @@ def markdown(results: dict, images: dict | None = None) -> str:
 # --------------------------------------------------------------------------------- plots
 
 
-def _pyplot():
-    import matplotlib
+def _figure(figsize: tuple[float, float]):
+    """A Figure with its own Agg canvas: no global backend, no pyplot, nothing left open."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    fig = Figure(figsize=figsize)
+    FigureCanvasAgg(fig)
+    return fig
 
 
 def plot_percall(rows: list[dict], path: Path) -> None:
-    plt = _pyplot()
     labels = [f"{r['quantity']}: {r['implementation']}" for r in rows]
     medians = [r["median_us"] for r in rows]
     errors = [[r["median_us"] - r["q1_us"] for r in rows],
               [r["q3_us"] - r["median_us"] for r in rows]]
     colours = {"mass matrix": "tab:blue", "forward dynamics": "tab:orange",
                "inverse dynamics": "tab:green"}
-    fig, ax = plt.subplots(figsize=(8, 0.35 * len(rows) + 1.4))
+    fig = _figure((8, 0.35 * len(rows) + 1.4))
+    ax = fig.subplots()
     y = list(range(len(rows)))[::-1]
     ax.barh(y, medians, xerr=errors, color=[colours.get(r["quantity"], "grey") for r in rows],
             capsize=2)
@@ -230,12 +231,11 @@ def plot_percall(rows: list[dict], path: Path) -> None:
     ax.grid(axis="x", which="both", alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 def plot_batched(rows: list[dict], path: Path) -> None:
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig = _figure((6, 4))
+    ax = fig.subplots()
     for backend in dict.fromkeys(r["backend"] for r in rows):
         mine = [r for r in rows if r["backend"] == backend]
         ax.errorbar([r["N"] for r in mine], [r["ns_per_state"] for r in mine],
@@ -250,12 +250,11 @@ def plot_batched(rows: list[dict], path: Path) -> None:
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 def plot_simulation(rows: list[dict], path: Path) -> None:
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(7, 2.8))
+    fig = _figure((7, 2.8))
+    ax = fig.subplots()
     y = list(range(len(rows)))[::-1]
     medians = [r["median_s"] for r in rows]
     errors = [[r["median_s"] - r["q1_s"] for r in rows], [r["q3_s"] - r["median_s"] for r in rows]]
@@ -270,12 +269,11 @@ def plot_simulation(rows: list[dict], path: Path) -> None:
     ax.grid(axis="x", which="both", alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 def plot_scaling(rows: list[dict], path: Path) -> None:
-    plt = _pyplot()
-    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
+    fig = _figure((10, 4))
+    left, right = fig.subplots(1, 2)
     chains = [r for r in rows if r["model"].startswith("chain:")]
     others = [r for r in rows if not r["model"].startswith("chain:")]
     series = (("derive_s", "derive", "tab:blue"), ("generate_s", "generate (incl. CSE)",
@@ -308,7 +306,6 @@ def plot_scaling(rows: list[dict], path: Path) -> None:
         ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 PLOTTERS = {"percall": plot_percall, "batched": plot_batched, "simulation": plot_simulation,

@@ -89,20 +89,25 @@ def model_key(model: Model) -> str:
 
 
 class Progress:
-    """Prints each stage and its time when verbose."""
+    """Logs each stage and its time at INFO (logger gagen.build.builder); `verbose` shows
+    them on stderr for this build (gagen.diagnostics.showing_progress)."""
 
     def __init__(self, report: BuildReport, verbose: bool):
         self.report, self.verbose = report, verbose
 
     def stage(self, name: str, seconds: float, detail: str = "") -> None:
         self.report.stages[name] = seconds
-        if self.verbose:
-            extra = f"  {detail}" if detail else ""
-            print(f"gagen: {name:<9} {seconds:7.2f} s{extra}", file=sys.stderr, flush=True)
+        extra = f"  {detail}" if detail else ""
+        self.say(f"{name:<9} {seconds:7.2f} s{extra}")
 
     def say(self, text: str) -> None:
-        if self.verbose:
-            print(f"gagen: {text}", file=sys.stderr, flush=True)
+        # imported here: a cached load never builds, and never pays for importing logging
+        import logging
+
+        from ..diagnostics import showing_progress
+
+        with showing_progress(self.verbose):
+            logging.getLogger(__name__).info(text)
 
 
 def generate_sources(model: Model, folder: Path, progress: Progress | None = None,
@@ -344,7 +349,7 @@ def load_compiled(model: Model, cache_dir: Path | None = None, fast_math: bool =
     module = shipped_module(model, fast_math, portable)
     if module is None:
         options = {"cache_dir": cache_dir, "fast_math": fast_math, "portable": portable,
-                   "verbose": True if verbose is None else verbose}
+                   "verbose": bool(verbose)}
         path, report = build(model, **options)
         try:
             module = import_extension(path, report.module_name)

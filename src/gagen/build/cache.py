@@ -170,21 +170,22 @@ def index_record(cache: Path, key: str, module) -> None:
 
 
 def default_cache_dir() -> Path:
-    """$GAGEN_CACHE_DIR, else the user's cache folder ($XDG_CACHE_HOME or ~/.cache)/gagen.
+    """$GAGEN_CACHE_DIR, else the platform's user cache folder for gagen (platformdirs:
+    $XDG_CACHE_HOME/gagen or ~/.cache/gagen on Linux, ~/Library/Caches/gagen on macOS,
+    %LOCALAPPDATA%\\gagen\\Cache on Windows).
 
-    An empty or relative $XDG_CACHE_HOME is ignored, as the XDG specification says: the cache
-    never lands relative to the working directory.
+    A relative folder from the platform's settings (e.g. a relative $XDG_CACHE_HOME, which
+    the XDG specification says to ignore) gives way to ~/.cache/gagen: the cache never lands
+    relative to the working directory.
     """
     env = os.environ.get("GAGEN_CACHE_DIR", "").strip()
     if env:
         return Path(env).expanduser()
-    if sys.platform == "darwin":
-        return Path.home() / "Library" / "Caches" / "gagen"
-    if os.name == "nt":
-        return Path(os.environ.get("LOCALAPPDATA") or Path.home()) / "gagen" / "Cache"
-    xdg = os.environ.get("XDG_CACHE_HOME", "").strip()
-    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".cache"
-    return base / "gagen"
+    import platformdirs
+
+    folder = Path(platformdirs.user_cache_dir("gagen", appauthor=False))
+    return folder if folder.is_absolute() else Path.home() / ".cache" / "gagen"
+
 
 
 class CacheWarning(UserWarning):
