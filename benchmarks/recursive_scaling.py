@@ -67,14 +67,9 @@ def old_derivation(name: str, timeout: float) -> tuple[float, int, int] | None:
 
 
 def recursive_build(model, cache_dir: Path) -> builder.BuildReport:
-    """A cold build of the recursive equations (the builder's derive swapped)."""
-    original = builder.derive
-    builder.derive = derive_recursive
-    try:
-        sp.core.cache.clear_cache()
-        _, report = builder.build(model, cache_dir=cache_dir)
-    finally:
-        builder.derive = original
+    """A cold build of the recursive equations."""
+    sp.core.cache.clear_cache()
+    _, report = builder.build(model, cache_dir=cache_dir, derivation="recursive")
     return report
 
 

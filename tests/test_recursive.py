@@ -107,9 +107,25 @@ def test_inverse_dynamics_consistent_with_mass_matrix_and_bias():
 
 
 @pytest.mark.slow
-def test_compiled_chain5_from_recursive_equations(tmp_path, monkeypatch):
+def test_compiled_chain5_from_recursive_equations(tmp_path):
     model = resolve_model("chain:5")
-    monkeypatch.setattr(builder, "derive", derive_recursive)
-    path, report = builder.build(model, out=tmp_path / "recursive")
+    path, report = builder.build(model, out=tmp_path / "recursive", derivation="recursive")
     compiled = CompiledDynamics(import_extension(path, report.module_name), model)
     assert_agree(compiled, LambdifyDynamics(derive(model)), np.random.default_rng(2))
+
+
+def test_auto_takes_the_recursive_form_from_nine_coordinates():
+    from gagen.symbolic.derivation import RECURSIVE_FROM_DOF, derivation_for
+
+    assert derivation_for(resolve_model("rrr")) == "gibbs-appell"
+    assert derivation_for(resolve_model(f"chain:{RECURSIVE_FROM_DOF - 1}")) == "gibbs-appell"
+    assert derivation_for(resolve_model(f"chain:{RECURSIVE_FROM_DOF}")) == "recursive"
+    assert derivation_for(resolve_model("rrr"), "recursive") == "recursive"
+    with pytest.raises(ValueError, match="unknown derivation"):
+        derivation_for(resolve_model("rrr"), "kane")
+
+
+def test_the_derivation_is_part_of_the_source_key():
+    model = resolve_model("chain:3")
+    keys = {builder.source_key(model, d) for d in ("gibbs-appell", "recursive")}
+    assert len(keys) == 2 and builder.source_key(model) == builder.source_key(model, "gibbs-appell")

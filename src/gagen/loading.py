@@ -10,7 +10,7 @@ import os
 from pathlib import Path
 
 BACKENDS = ("compiled", "lambdify")
-_COMPILED_OPTIONS = ("cache_dir", "fast_math", "verbose", "portable")
+_COMPILED_OPTIONS = ("cache_dir", "fast_math", "verbose", "portable", "derivation")
 
 
 def load(model="rrr", backend: str = "compiled", **options):
@@ -19,8 +19,11 @@ def load(model="rrr", backend: str = "compiled", **options):
     `model` is a built-in name (`rrr`, `chain:N`), a model file (.yaml, .yml, .json), a
     .urdf file, or a `gagen.model.Model`. `backend` is "compiled" (generated C through
     Cython, built on first use and cached) or "lambdify" (SymPy's lambdify, no compiler).
-    Options of the compiled backend: `cache_dir`, `fast_math`, `verbose`, `portable` (one
-    version of the kernels for any CPU, no FMA clone).
+    Options of the compiled backend: `cache_dir`, `fast_math`, `verbose` (show the build's
+    progress), `portable` (one version of the kernels for any CPU, no FMA clone). Both
+    backends take `derivation`: "auto" (default: the paper's Gibbs-Appell form up to 8
+    coordinates, the recursive Newton-Euler/CRBA form from 9 on), "gibbs-appell" or
+    "recursive"; they give the same equations.
 
     Returns a `gagen.runtime.dynamics.Dynamics`: `mass_matrix`, `forcing`,
     `forward_dynamics`, `inverse_dynamics`, `gravity`, `energy`, and the model's names.
@@ -28,9 +31,11 @@ def load(model="rrr", backend: str = "compiled", **options):
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend '{backend}' (expected one of {', '.join(BACKENDS)})")
     if backend == "lambdify":
+        derivation = options.pop("derivation", "auto")
         if options:
-            raise TypeError(f"the lambdify backend takes no options, got {', '.join(options)}")
-        return _load_lambdify(model)
+            raise TypeError(f"the lambdify backend takes only the option derivation, got "
+                            f"{', '.join(options)}")
+        return _load_lambdify(model, derivation)
     unknown = [key for key in options if key not in _COMPILED_OPTIONS]
     if unknown:
         raise TypeError(f"unknown option(s) {', '.join(unknown)} of the compiled backend "
@@ -38,21 +43,22 @@ def load(model="rrr", backend: str = "compiled", **options):
     return _load_compiled(model, **options)
 
 
-def _load_lambdify(model):
+def _load_lambdify(model, derivation: str):
     from .model.resolve import resolve_model
     from .runtime.lambdify import LambdifyDynamics
-    from .symbolic.gibbs_appell import derive
+    from .symbolic.derivation import derive_equations
 
-    return LambdifyDynamics(derive(resolve_model(model)))
+    return LambdifyDynamics(derive_equations(resolve_model(model), derivation))
 
 
 def _load_compiled(model, cache_dir=None, fast_math: bool = False, verbose=None,
-                   portable: bool = False):
+                   portable: bool = False, derivation: str = "auto"):
     from .build import cache
 
     digest = None
     if isinstance(model, (str, os.PathLike)):
-        digest = cache.input_key(model, cache.compile_flags(fast_math, portable))
+        options = [*cache.compile_flags(fast_math, portable), f"derivation={derivation}"]
+        digest = cache.input_key(model, options)
         folder = Path(cache_dir) if cache_dir else cache.default_cache_dir()
         module = cache.index_lookup(folder, digest) if digest else None
         if module is not None:
@@ -64,4 +70,4 @@ def _load_compiled(model, cache_dir=None, fast_math: bool = False, verbose=None,
 
     return load_compiled(resolve_model(model), cache_dir=cache_dir, fast_math=fast_math,
                          verbose=verbose, portable=portable, model_ref=model,
-                         input_digest=digest)
+                         input_digest=digest, derivation=derivation)

@@ -102,6 +102,10 @@ def _build_arguments(p: argparse.ArgumentParser) -> None:
     _add_cache_dir(p)
     p.add_argument("--fast-math", action="store_true",
                    help="compile with -ffast-math (off by default: it may reorder floating point)")
+    p.add_argument("--derivation", choices=("auto", "gibbs-appell", "recursive"), default="auto",
+                   help="how the equations are derived: the paper's Gibbs-Appell form, or the "
+                   "recursive Newton-Euler/CRBA form that builds big robots in seconds "
+                   "(default auto: Gibbs-Appell up to 8 coordinates, recursive from 9)")
 
 
 def _info_arguments(p: argparse.ArgumentParser) -> None:
@@ -198,7 +202,8 @@ def build_command(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else (Path("generated") / model.name if args.model == "rrr"
                                            else None)
     start = time.perf_counter()
-    path, report = build(model, out=out, cache_dir=args.cache_dir, fast_math=args.fast_math)
+    path, report = build(model, out=out, cache_dir=args.cache_dir, fast_math=args.fast_math,
+                         derivation=args.derivation)
     total = time.perf_counter() - start
     if report.cached:
         print(f"gagen: '{model.name}' is up to date in the cache")

@@ -29,7 +29,7 @@ from ..codegen.render import MODEL_C_FILES, c_identifier, generate, write_source
 from ..errors import BuildError, CompilerNotFoundError
 from ..model.model import Model
 from ..runtime.compiled import CompiledDynamics
-from ..symbolic.gibbs_appell import derive
+from ..symbolic.derivation import derivation_for, derive_equations
 from .cache import (  # noqa: F401 (re-exported: the cache's API was here)
     _CHECKSUM_FILE,
     _OWNER_FILE,
@@ -63,10 +63,12 @@ class BuildReport:
     cached: bool = False
 
 
-def source_key(model: Model) -> str:
-    """Hash of what the generated sources depend on: model, parameter names, generator, templates."""
+def source_key(model: Model, derivation: str = "auto") -> str:
+    """Hash of what the generated sources depend on: model, parameter names, the derivation
+    used, the generator's code and templates."""
     h = hashlib.sha256()
-    for part in (model.canonical(), ",".join(model.parameters), __version__, generator_digest()):
+    for part in (model.canonical(), ",".join(model.parameters), __version__, generator_digest(),
+                 derivation_for(model, derivation)):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
@@ -111,15 +113,16 @@ class Progress:
 
 
 def generate_sources(model: Model, folder: Path, progress: Progress | None = None,
-                     report: BuildReport | None = None) -> BuildReport:
+                     report: BuildReport | None = None, derivation: str = "auto") -> BuildReport:
     """Derive and generate a model's sources into `folder` (no compilation)."""
-    key = source_key(model)
+    key = source_key(model, derivation)
     name = module_name_for(model, key)
     report = report or BuildReport(model.name, name, folder)
     progress = progress or Progress(report, verbose=False)
-    progress.say("deriving the Gibbs-Appell equations...")
+    method = derivation_for(model, derivation)
+    progress.say(f"deriving the equations ({method})...")
     start = time.perf_counter()
-    eqs = derive(model)
+    eqs = derive_equations(model, method)
     progress.stage("derive", time.perf_counter() - start,
                    f"{model.dof} coordinates, {len(eqs.intermediates)} intermediates")
     progress.say("generating C (one CSE pass over every output)...")
@@ -249,8 +252,8 @@ def compile_sources(folder: Path, module_name: str, flags: list[str], verbose: b
 
 
 def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
-          fast_math: bool = False, verbose: bool = False, portable: bool = False
-          ) -> tuple[Path, BuildReport]:
+          fast_math: bool = False, verbose: bool = False, portable: bool = False,
+          derivation: str = "auto") -> tuple[Path, BuildReport]:
     """Derive, generate and compile; return the extension's path and what was done.
 
     With `out`, the sources and the module are written there. Otherwise the cache is used:
@@ -258,7 +261,7 @@ def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
     incomplete one is rebuilt with a CacheWarning.
     """
     flags = compile_flags(fast_math, portable)
-    src_key = source_key(model)
+    src_key = source_key(model, derivation)
     name = module_name_for(model, src_key)
     suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
     if out is None:
@@ -281,7 +284,7 @@ def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
     tmp = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=final.parent))
     try:
         (tmp / _OWNER_FILE).write_text(f"{socket.gethostname()} {os.getpid()}\n")
-        generate_sources(model, tmp, progress, report)
+        generate_sources(model, tmp, progress, report, derivation)
         progress.say(f"compiling with {' '.join(flags)} (Cython and the C compiler, "
                      "usually 5-15 s)...")
         start = time.perf_counter()
@@ -325,7 +328,8 @@ def _publish(tmp: Path, final: Path, replace: bool) -> None:
         # another process finished the same build first: keep theirs
 
 
-def shipped_module(model: Model, fast_math: bool, portable: bool = False):
+def shipped_module(model: Model, fast_math: bool, portable: bool = False,
+                   derivation: str = "auto"):
     """The module compiled at install time from `generated/`, if it was built from this model
     by this generator (a golden file left behind by a generator change is not used)."""
     if fast_math or portable:
@@ -334,22 +338,23 @@ def shipped_module(model: Model, fast_math: bool, portable: bool = False):
         module = importlib.import_module(f"gagen.shipped.{module_name_for(model)}")
     except ImportError:
         return None
-    return module if module.KEY == source_key(model) else None
+    return module if module.KEY == source_key(model, derivation) else None
 
 
 def load_compiled(model: Model, cache_dir: Path | None = None, fast_math: bool = False,
                   verbose: bool | None = None, portable: bool = False, model_ref=None,
-                  input_digest: str | None = None) -> CompiledDynamics:
+                  input_digest: str | None = None, derivation: str = "auto"
+                  ) -> CompiledDynamics:
     """The compiled backend of `gagen.load`: shipped module, cached module, or a new build.
 
     With `input_digest` (gagen.load's key of the input bytes), the module found is recorded
     in the cache's index, so the next load of the same input needs no SymPy.
     """
-    key = source_key(model)
-    module = shipped_module(model, fast_math, portable)
+    key = source_key(model, derivation)
+    module = shipped_module(model, fast_math, portable, derivation)
     if module is None:
         options = {"cache_dir": cache_dir, "fast_math": fast_math, "portable": portable,
-                   "verbose": bool(verbose)}
+                   "verbose": bool(verbose), "derivation": derivation}
         path, report = build(model, **options)
         try:
             module = import_extension(path, report.module_name)
