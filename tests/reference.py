@@ -1,6 +1,7 @@
 """Independent numerical references for checking the symbolic Gibbs-Appell derivation.
 
-Everything here is plain numpy and deliberately takes a different route from a
+The model's numbers come from gagen.model.numeric (a plain evaluation of its entries);
+everything else here is plain numpy and deliberately takes a different route from a
 body-frame symbolic derivation: poses, velocities, accelerations, forces and inertias
 are all expressed in the WORLD frame, and the dynamics come from a recursive
 Newton-Euler pass. A second, fully external reference is built with pinocchio.
@@ -19,107 +20,18 @@ Conventions (shared with gagen.model):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
-import sympy as sp
 
-if TYPE_CHECKING:
-    from gagen.model import Model
-
-
-@dataclass(frozen=True)
-class NumericBody:
-    name: str
-    parent: int  # index into NumericModel.bodies, -1 for the world
-    joint_type: str  # "revolute", "continuous", "prismatic" or "fixed"
-    origin_R: np.ndarray  # 3x3, joint frame orientation in the parent frame
-    origin_xyz: np.ndarray  # (3,), joint frame origin in the parent frame
-    axis: np.ndarray  # (3,), unit axis in the joint (= body) frame
-    mass: float
-    com: np.ndarray  # (3,), mass centre in the body frame
-    inertia: np.ndarray  # 3x3 central inertia in the body frame
-    coordinate: int | None  # index into q, None for a fixed joint
-
-    @property
-    def rotates(self) -> bool:
-        return self.joint_type in ("revolute", "continuous")
-
-
-@dataclass(frozen=True)
-class NumericModel:
-    bodies: tuple[NumericBody, ...]
-    gravity: np.ndarray  # (3,), world frame
-    coordinates: tuple[str, ...]
-
-    @property
-    def dof(self) -> int:
-        return len(self.coordinates)
-
-    def welded_to_world(self) -> list[bool]:
-        """Per body: True if no moving joint lies between it and the world."""
-        welded: list[bool] = []
-        for b in self.bodies:
-            parent_welded = True if b.parent < 0 else welded[b.parent]
-            welded.append(parent_welded and b.coordinate is None)
-        return welded
-
-
-# ----------------------------------------------------------------------------- model
-
-
-def numeric_model(model: Model, p: dict[str, float] | None = None) -> NumericModel:
-    """Evaluate every sympy entry of `model` with its parameter defaults, overridden by `p`."""
-    values = {name: float(v) for name, v in model.parameters.items()}
-    if p:
-        unknown = set(p) - set(values)
-        if unknown:
-            raise KeyError(f"unknown parameter(s) {sorted(unknown)}")
-        values.update({k: float(v) for k, v in p.items()})
-    subs = {sp.Symbol(k): sp.Float(v, 30) for k, v in values.items()}
-
-    index = {b.name: i for i, b in enumerate(model.bodies)}
-    coord_index = {name: k for k, name in enumerate(model.coordinates)}
-    bodies = []
-    for b in model.bodies:
-        j = b.joint
-        axis = _array(j.axis, subs).reshape(3)
-        if j.moves:
-            # the model stores axes as given; only the direction matters
-            axis = axis / np.linalg.norm(axis)
-        bodies.append(NumericBody(
-            name=b.name,
-            parent=index.get(b.parent, -1),  # -1: the world
-            joint_type=j.type,
-            origin_R=_array(j.origin_rotation, subs).reshape(3, 3),
-            origin_xyz=_array(j.origin_xyz, subs).reshape(3),
-            axis=axis,
-            mass=float(sp.sympify(b.mass).xreplace(subs).evalf(30)),
-            com=_array(b.com, subs).reshape(3),
-            inertia=_array(b.inertia, subs).reshape(3, 3),
-            coordinate=coord_index[j.name] if j.moves else None,
-        ))
-    gravity = _array(model.gravity, subs).reshape(3)
-    return NumericModel(tuple(bodies), gravity, tuple(model.coordinates))
-
-
-def _array(matrix, subs) -> np.ndarray:
-    # evaluate with 30 digits so that e.g. cos(pi/7) in an origin is exact to double precision
-    return np.array([float(sp.sympify(e).xreplace(subs).evalf(30)) for e in matrix], dtype=float)
-
-
-# ------------------------------------------------------------------------ kinematics
-
-
-def rotation_about(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rodrigues' formula for a unit axis."""
-    k = np.asarray(axis, dtype=float)
-    K = skew(k)
-    return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)
-
-
-def skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+from gagen.model.numeric import (  # noqa: F401 (re-exported for the tests)
+    NumericBody,
+    NumericModel,
+    numeric_model,
+    rotation_about,
+    skew,
+)
+from gagen.reference.pinocchio import from_pinocchio, pinocchio_model, to_pinocchio
 
 
 def homogeneous(R: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -274,64 +186,9 @@ def energy(nm: NumericModel, q, qd) -> tuple[float, float]:
 
 
 def pin_model(nm: NumericModel) -> Any:
-    """A pinocchio Model with the same tree, inertias and gravity as `nm`.
-
-    Pinocchio's algorithms (crba in particular) need its joints in depth-first order,
-    which our parents-first body order need not be. So the joints are added depth-first
-    and `pm.gagen_order[k]` is our coordinate index of pinocchio's k-th velocity; the
-    pin_* helpers below take and return vectors in OUR order.
-    """
-    import pinocchio as pin
-
-    pm = pin.Model()
-    # per body: the pinocchio joint carrying it and its frame's placement in that joint
-    joint_of: dict[int, int] = {}
-    placement: dict[int, Any] = {}
-    order: list[int] = []
-    for i in _depth_first(nm):
-        b = nm.bodies[i]
-        parent_joint = 0 if b.parent < 0 else joint_of[b.parent]
-        parent_place = pin.SE3.Identity() if b.parent < 0 else placement[b.parent]
-        origin = parent_place * pin.SE3(b.origin_R, b.origin_xyz)
-        if b.coordinate is None:
-            joint_id, body_place = parent_joint, origin
-        else:
-            joint = (pin.JointModelRevoluteUnaligned(b.axis) if b.rotates
-                     else pin.JointModelPrismaticUnaligned(b.axis))
-            joint_id = pm.addJoint(parent_joint, joint, origin, nm.coordinates[b.coordinate])
-            body_place = pin.SE3.Identity()
-            order.append(b.coordinate)
-        pm.appendBodyToJoint(joint_id, pin.Inertia(b.mass, b.com, b.inertia), body_place)
-        joint_of[i], placement[i] = joint_id, body_place
-    pm.gravity = pin.Motion(np.asarray(nm.gravity, dtype=float), np.zeros(3))
-    # every joint has nq = nv = 1, so one permutation maps q, qd, qdd and tau alike
-    assert pm.nq == pm.nv == nm.dof
-    pm.gagen_order = np.array(order, dtype=int)
-    return pm
-
-
-def _depth_first(nm: NumericModel) -> list[int]:
-    children: dict[int, list[int]] = {}
-    for i, b in enumerate(nm.bodies):
-        children.setdefault(b.parent, []).append(i)
-    visit: list[int] = []
-    stack = list(reversed(children.get(-1, [])))
-    while stack:
-        i = stack.pop()
-        visit.append(i)
-        stack.extend(reversed(children.get(i, [])))
-    return visit
-
-
-def _to_pin(pm: Any, *vectors) -> list[np.ndarray]:
-    return [np.ascontiguousarray(np.asarray(v, dtype=np.float64)[pm.gagen_order])
-            for v in vectors]
-
-
-def _from_pin(pm: Any, vector) -> np.ndarray:
-    out = np.empty(pm.nv)
-    out[pm.gagen_order] = np.asarray(vector)
-    return out
+    """The Pinocchio model of `nm` (gagen.reference.pinocchio: one builder for the tests and
+    the benchmarks); the pin_* helpers below take and return vectors in gagen's order."""
+    return pinocchio_model(nm)
 
 
 def welded_potential(nm: NumericModel) -> float:
@@ -344,7 +201,7 @@ def welded_potential(nm: NumericModel) -> float:
 def pin_mass_matrix(pm: Any, q) -> np.ndarray:
     import pinocchio as pin
 
-    M = np.array(pin.crba(pm, pm.createData(), *_to_pin(pm, q)))
+    M = np.array(pin.crba(pm, pm.createData(), *to_pinocchio(pm, q)))
     # crba fills only the upper triangle
     M = np.triu(M) + np.triu(M, 1).T
     out = np.empty_like(M)
@@ -355,13 +212,13 @@ def pin_mass_matrix(pm: Any, q) -> np.ndarray:
 def pin_rnea(pm: Any, q, qd, qdd) -> np.ndarray:
     import pinocchio as pin
 
-    return _from_pin(pm, pin.rnea(pm, pm.createData(), *_to_pin(pm, q, qd, qdd)))
+    return from_pinocchio(pm, pin.rnea(pm, pm.createData(), *to_pinocchio(pm, q, qd, qdd)))
 
 
 def pin_forward_dynamics(pm: Any, q, qd, tau) -> np.ndarray:
     import pinocchio as pin
 
-    return _from_pin(pm, pin.aba(pm, pm.createData(), *_to_pin(pm, q, qd, tau)))
+    return from_pinocchio(pm, pin.aba(pm, pm.createData(), *to_pinocchio(pm, q, qd, tau)))
 
 
 def pin_energy(pm: Any, q, qd) -> tuple[float, float]:
@@ -369,7 +226,7 @@ def pin_energy(pm: Any, q, qd) -> tuple[float, float]:
     import pinocchio as pin
 
     data = pm.createData()
-    q, qd = _to_pin(pm, q, qd)
+    q, qd = to_pinocchio(pm, q, qd)
     kinetic = pin.computeKineticEnergy(pm, data, q, qd)
     potential = pin.computePotentialEnergy(pm, data, q)
     return float(kinetic), float(potential)

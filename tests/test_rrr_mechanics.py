@@ -7,7 +7,7 @@ import pytest
 import sympy as sp
 
 import gagen
-from gagen.bench.peers import kane_rrr
+from gagen.reference.kane import kane_rrr
 from gagen.symbolic.gibbs_appell import derive, joint_torque_forces
 
 

@@ -15,15 +15,14 @@ centre offset for every leaf body) at the model's parameters.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import sympy as sp
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from ..model.model import WORLD, Model
+from ..model import numeric
+from ..model.model import Model
 
 PAPER_TORQUE_LABELS = ("T01z", "T12x", "T23x")
 
@@ -31,99 +30,10 @@ PAPER_TORQUE_LABELS = ("T01z", "T12x", "T23x")
 # ----------------------------------------------------------------- forward kinematics
 
 
-@dataclass(frozen=True)
-class _Link:
-    parent: int  # index into the bodies, -1 for the world
-    joint_type: str
-    origin_xyz: np.ndarray
-    origin_R: np.ndarray
-    axis: np.ndarray
-    coordinate: int | None
-    com: np.ndarray
-
-
-def _parameter_values(model: Model, p=None) -> dict[str, float]:
-    values = {k: float(v) for k, v in model.parameters.items()}
-    if p is None:
-        return values
-    if isinstance(p, dict):
-        unknown = set(p) - set(values)
-        if unknown:
-            raise KeyError(f"unknown parameter(s) {', '.join(sorted(unknown))}")
-        values.update({k: float(v) for k, v in p.items()})
-        return values
-    arr = np.asarray(p, dtype=float).ravel()
-    if arr.size != len(values):
-        raise ValueError(f"p must have {len(values)} entries in the model's parameter order")
-    return dict(zip(values, arr.tolist()))
-
-
-def _numeric_links(model: Model, p=None) -> list[_Link]:
-    subs = {sp.Symbol(k): sp.Float(v) for k, v in _parameter_values(model, p).items()}
-
-    def arr(matrix, shape):
-        return np.array([float(sp.sympify(e).xreplace(subs).evalf()) for e in matrix],
-                        dtype=float).reshape(shape)
-
-    index = {b.name: i for i, b in enumerate(model.bodies)}
-    coord = {name: k for k, name in enumerate(model.coordinates)}
-    links = []
-    for b in model.bodies:
-        j = b.joint
-        axis = arr(j.axis, 3)
-        if j.moves:
-            axis = axis / np.linalg.norm(axis)
-        links.append(_Link(parent=-1 if b.parent == WORLD else index[b.parent],
-                           joint_type=j.type, origin_xyz=arr(j.origin_xyz, 3),
-                           origin_R=arr(j.origin_rotation, (3, 3)), axis=axis,
-                           coordinate=coord[j.name] if j.moves else None,
-                           com=arr(b.com, 3)))
-    return links
-
-
-def _rotations(axis: np.ndarray, angles: np.ndarray) -> np.ndarray:
-    """Rodrigues' formula for one unit axis and m angles: (m, 3, 3)."""
-    K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
-                  [-axis[1], axis[0], 0.0]])
-    s = np.sin(angles)[:, None, None]
-    c = np.cos(angles)[:, None, None]
-    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
-
-
 def body_frames(model: Model, q, p=None) -> tuple[np.ndarray, np.ndarray]:
-    """World origins (m, nb, 3) and rotations (m, nb, 3, 3) of every body frame.
-
-    q has shape (n,) or (m, n). Frames follow URDF (gagen.model): a joint's origin places
-    the joint frame in the parent's frame; the joint then rotates about, or slides along,
-    its axis given in that frame.
-    """
-    q = np.asarray(q, dtype=float)
-    if q.ndim not in (1, 2) or q.shape[-1] != model.dof:
-        raise ValueError(f"q must have shape ({model.dof},) or (m, {model.dof}); got {q.shape}")
-    q2 = q.reshape(-1, model.dof)
-    m = q2.shape[0]
-    links = _numeric_links(model, p)
-    origins = np.zeros((m, len(links), 3))
-    rotations = np.zeros((m, len(links), 3, 3))
-    for i, link in enumerate(links):
-        if link.parent < 0:
-            R_par, o_par = np.broadcast_to(np.eye(3), (m, 3, 3)), np.zeros((m, 3))
-        else:
-            R_par, o_par = rotations[:, link.parent], origins[:, link.parent]
-        R_joint = R_par @ link.origin_R
-        o = o_par + R_par @ link.origin_xyz
-        x = q2[:, link.coordinate] if link.coordinate is not None else np.zeros(m)
-        if link.joint_type in ("revolute", "continuous"):
-            R = R_joint @ _rotations(link.axis, x)
-        else:
-            R = R_joint
-            if link.joint_type == "prismatic":
-                o = o + (R_joint @ link.axis) * x[:, None]
-        origins[:, i] = o
-        rotations[:, i] = R
-    if q.ndim == 1:
-        return origins[0], rotations[0]
-    return origins, rotations
+    """World origins (m, nb, 3) and rotations (m, nb, 3, 3) of every body frame, for q of
+    shape (n,) or (m, n) (gagen.model.numeric.body_frames at the parameters p)."""
+    return numeric.body_frames(numeric.numeric_model(model, p), q)
 
 
 def rrr_points(q, p=None, model: Model | None = None) -> np.ndarray:
@@ -132,7 +42,7 @@ def rrr_points(q, p=None, model: Model | None = None) -> np.ndarray:
         from ..model.builtin import load_builtin
 
         model = load_builtin("rrr")
-    values = _parameter_values(model, p)
+    values = numeric.parameter_values(model, p)
     L1, L2, L3 = values["L1"], values["L2"], values["L3"]
     q = np.asarray(q, dtype=float)
     qq = np.atleast_2d(q)
@@ -167,8 +77,9 @@ def arm_points(model: Model, q, p=None) -> tuple[np.ndarray, list[tuple[int, int
     qq = np.atleast_2d(q)
     if is_paper_robot(model) and {"L1", "L2", "L3"} <= set(model.parameters):
         return rrr_points(qq, p, model), [(0, 1), (1, 2), (2, 3)]
-    origins, rotations = body_frames(model, qq, p)
-    links = _numeric_links(model, p)
+    nm = numeric.numeric_model(model, p)
+    origins, rotations = numeric.body_frames(nm, qq)
+    links = nm.bodies
     nb = len(links)
     points = [np.zeros((qq.shape[0], 3))] + [origins[:, i] for i in range(nb)]
     edges = [(0 if link.parent < 0 else link.parent + 1, i + 1) for i, link in enumerate(links)]

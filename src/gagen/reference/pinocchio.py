@@ -1,0 +1,72 @@
+"""One Pinocchio model builder, for the tests and the benchmarks (Pinocchio is optional:
+`pip install gagen[bench]` or `gagen[test]`).
+
+Pinocchio needs its joints in depth-first order, which gagen's parents-first body order
+need not be, so joints are added depth-first and `pm.gagen_order[k]` is gagen's
+coordinate index of Pinocchio's k-th velocity; `to_pinocchio` / `from_pinocchio` convert
+vectors (every joint has nq = nv = 1, so one permutation serves q, qd, qdd and tau).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..model.numeric import NumericModel, numeric_model
+
+
+def pinocchio_model(model, p=None) -> Any:
+    """A pinocchio.Model with the same tree, inertias and gravity as a gagen Model (at its
+    defaults overridden by `p`) or a NumericModel. ImportError if Pinocchio is missing."""
+    import pinocchio as pin
+
+    nm = model if isinstance(model, NumericModel) else numeric_model(model, p)
+    pm = pin.Model()
+    joint_of: dict[int, int] = {}  # per body: the Pinocchio joint carrying it
+    placement: dict[int, Any] = {}  # and its frame's placement in that joint
+    order: list[int] = []
+    for i in nm.depth_first():
+        b = nm.bodies[i]
+        parent_joint = 0 if b.parent < 0 else joint_of[b.parent]
+        parent_place = pin.SE3.Identity() if b.parent < 0 else placement[b.parent]
+        origin = parent_place * pin.SE3(b.origin_R, b.origin_xyz)
+        if b.coordinate is None:
+            joint_id, body_place = parent_joint, origin
+        else:
+            joint = (pin.JointModelRevoluteUnaligned(b.axis) if b.rotates
+                     else pin.JointModelPrismaticUnaligned(b.axis))
+            joint_id = pm.addJoint(parent_joint, joint, origin, nm.coordinates[b.coordinate])
+            body_place = pin.SE3.Identity()
+            order.append(b.coordinate)
+        pm.appendBodyToJoint(joint_id, pin.Inertia(b.mass, b.com, b.inertia), body_place)
+        joint_of[i], placement[i] = joint_id, body_place
+    pm.gravity = pin.Motion(np.asarray(nm.gravity, dtype=float), np.zeros(3))
+    if not (pm.nq == pm.nv == nm.dof):
+        raise RuntimeError(f"the Pinocchio model has nq={pm.nq}, nv={pm.nv}; expected {nm.dof}")
+    pm.gagen_order = np.array(order, dtype=int)
+    return pm
+
+
+def to_pinocchio(pm, *vectors) -> list[np.ndarray]:
+    """Vectors in gagen's coordinate order -> Pinocchio's (contiguous float64)."""
+    return [np.ascontiguousarray(np.asarray(v, dtype=np.float64)[pm.gagen_order])
+            for v in vectors]
+
+
+def from_pinocchio(pm, vector) -> np.ndarray:
+    """A vector in Pinocchio's velocity order -> gagen's coordinate order."""
+    out = np.empty(pm.nv)
+    out[pm.gagen_order] = np.asarray(vector)
+    return out
+
+
+def pinocchio_mass_matrix(pm, data, q_pin) -> np.ndarray:
+    """crba's upper triangle, completed, in gagen's order."""
+    import pinocchio as pin
+
+    M = np.array(pin.crba(pm, data, q_pin))
+    M = np.triu(M) + np.triu(M, 1).T
+    out = np.empty_like(M)
+    out[np.ix_(pm.gagen_order, pm.gagen_order)] = M
+    return out
