@@ -132,7 +132,7 @@ def forward_dynamics_aba(model: Model) -> AbaProgram:
     coords = CoordinateSymbols.for_model(model)
     rec = Recorder()
     links = _links(model, coords, rec)
-    v, c, bias = _velocity_pass(links, coords, rec)
+    c, bias = _velocity_pass(links, coords, rec)
     U, Dinv, u = _articulated_pass(links, coords, rec, c, bias)
     qdd = _acceleration_pass(links, rec, c, U, Dinv, u, -sp.Matrix(model.gravity), model.dof)
     program = AbaProgram(model=model, coords=coords,
@@ -166,7 +166,7 @@ def _motion_to_child(link: Link, w_p: Vec, v_p: Vec, rec: Recorder) -> tuple[Vec
 
 
 def _velocity_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder):
-    """Velocities v_i, velocity-product accelerations c_i and bias forces p_i = v x* I v."""
+    """Velocity-product accelerations c_i and bias forces p_i = v_i x* I_i v_i."""
     v: list[tuple[Vec, Vec]] = []
     c: list[tuple[Vec, Vec]] = []
     bias: list[tuple[Vec, Vec]] = []
@@ -183,7 +183,7 @@ def _velocity_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder):
         L, P = _rigid_inertia(link).times(w, vel)
         L, P = rec.vec(L), rec.vec(P)
         bias.append((rec.vec(w.cross(L) + vel.cross(P)), rec.vec(w.cross(P))))
-    return v, c, bias
+    return c, bias
 
 
 def _articulated_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder,
