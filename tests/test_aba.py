@@ -45,11 +45,11 @@ def branched_prismatic_model() -> Model:
              [0.05, 0.02, 0], (0.05, 0.06, 0.07)),
         body("b3", "b2", "prismatic", [0, 0.1, 0], [0, 0, 0.7], [0.3, -0.5, 0.8], m3,
              [0, 0, c], (0.08, 0.05, 0.09)),
-        body("b4", "b3", "revolute", [0.1, 0, L], [0.1, 0.2, 0.3], [1, 0, 0], 0.9,
+        body("b4", "b3", "revolute", [0.1, 0, L], [0.1, 0.2, 0.3], [-1, 0, 0], 0.9,
              [0, 0.1, 0], (0.03, 0.04, 0.05)),
         body("b5", "b1", "continuous", [0, 0, 0.3], [0, 0, 0], [0, 1, 0], 1.1,
              [0.1, 0, 0], (0.04, 0.05, 0.06)),
-        body("b6", "b5", "prismatic", [0.2, 0, 0], [0, -0.4, 0], [0, 0, 1], m2,
+        body("b6", "b5", "prismatic", [0.2, 0, 0], [0, -0.4, 0], [0, 0, -1], m2,
              [0, 0.03, 0.02], (0.02, 0.03, 0.04)),
     )
     return Model(name="branched_prismatic", bodies=bodies, parameters=params,
@@ -109,6 +109,8 @@ def test_branched_model_exercises_prismatic_and_fixed_parents():
     types = {b.name: b.joint.type for b in model.bodies}
     parents = {b.parent for b in model.bodies}
     assert "prismatic" in types.values()
+    axes = [tuple(b.joint.axis) for b in model.bodies if b.joint.moves]
+    assert (0, 0, -1) in axes and (-1, 0, 0) in axes  # negative coordinate axes, too
     assert {name for name, t in types.items() if t == "fixed"} <= parents  # fixed with children
 
 

@@ -208,12 +208,13 @@ def _articulated_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorde
             U[i] = (U_n, U_f)
             if link.parent is None:
                 continue
-            W_n, W_f = rec.vec(U_n * Dinv[i]), rec.vec(U_f * Dinv[i])
-            Ia = Inertia(IA[i].A - W_n * U_n.T, IA[i].B - W_n * U_f.T,
-                         IA[i].C - W_f * U_f.T).named(rec)
+            W_n, W_f = U_n * Dinv[i], U_f * Dinv[i]
+            Ia = Inertia(IA[i].A - W_n * U_n.T, IA[i].B - W_n * U_f.T, IA[i].C - W_f * U_f.T)
+            n_a, f_a = n_i + W_n * u[i], f_i + W_f * u[i]
+            _exact_along_axis(link, coords.tau[link.k], W_n, W_f, Ia, n_a, f_a)
+            W_n, W_f, Ia = rec.vec(W_n), rec.vec(W_f), Ia.named(rec)
             In, If = Ia.times(*c[i])
-            n_i = rec.vec(n_i + In + W_n * u[i])
-            f_i = rec.vec(f_i + If + W_f * u[i])
+            n_i, f_i = rec.vec(n_a + In), rec.vec(f_a + If)
         if link.parent is None:
             continue
         up = _inertia_to_parent(link, Ia, rec)
@@ -223,6 +224,41 @@ def _articulated_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorde
         pA[link.parent][0] = pA[link.parent][0] + n_up
         pA[link.parent][1] = pA[link.parent][1] + f_up
     return U, Dinv, u
+
+
+def _coordinate_axis(link: Link) -> tuple[int, int] | None:
+    """(j, sign) when the joint axis is sign * e_j, else None."""
+    nonzero = [j for j, a in enumerate(link.axis) if a != 0]
+    if len(nonzero) == 1 and abs(link.axis[nonzero[0]]) == 1:
+        j = nonzero[0]
+        return j, (1 if link.axis[j] > 0 else -1)
+    return None
+
+
+def _exact_along_axis(link: Link, tau, W_n: Vec, W_f: Vec, Ia: Inertia,
+                      n_a: Vec, f_a: Vec) -> None:
+    """Put in, for an axis sign * e_j, what the rounding-free algebra knows (in place).
+
+    I^a s = I^A s - U (s^T U) / D = 0, so the row and column of I^a along the axis vanish;
+    s^T W = s^T U / D = 1 gives W's component sign; and s^T p^a = s^T p^A + u = tau gives
+    p^a's component sign * tau. Left to SymPy these are D * (1/D) and x - x * (D * (1/D)):
+    operations that compute 1 and 0."""
+    found = _coordinate_axis(link)
+    if found is None:
+        return
+    j, sign = found
+    if link.rotates:
+        W_n[j] = sign
+        n_a[j] = sign * tau
+        Ia.A[j, :] = sp.zeros(1, 3)
+        Ia.A[:, j] = sp.zeros(3, 1)
+        Ia.B[j, :] = sp.zeros(1, 3)
+    else:
+        W_f[j] = sign
+        f_a[j] = sign * tau
+        Ia.C[j, :] = sp.zeros(1, 3)
+        Ia.C[:, j] = sp.zeros(3, 1)
+        Ia.B[:, j] = sp.zeros(3, 1)
 
 
 def _inertia_to_parent(link: Link, I: Inertia, rec: Recorder) -> Inertia:
