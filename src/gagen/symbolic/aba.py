@@ -208,11 +208,12 @@ def _articulated_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorde
             U[i] = (U_n, U_f)
             if link.parent is None:
                 continue
-            W_n, W_f = U_n * Dinv[i], U_f * Dinv[i]
+            W_n, W_f = rec.vec(U_n * Dinv[i]), rec.vec(U_f * Dinv[i])  # U / D
+            _exact_gain(link, W_n, W_f)
             Ia = Inertia(IA[i].A - W_n * U_n.T, IA[i].B - W_n * U_f.T, IA[i].C - W_f * U_f.T)
             n_a, f_a = n_i + W_n * u[i], f_i + W_f * u[i]
-            _exact_along_axis(link, coords.tau[link.k], W_n, W_f, Ia, n_a, f_a)
-            W_n, W_f, Ia = rec.vec(W_n), rec.vec(W_f), Ia.named(rec)
+            _exact_articulated(link, coords.tau[link.k], Ia, n_a, f_a)
+            Ia = Ia.named(rec)
             In, If = Ia.times(*c[i])
             n_i, f_i = rec.vec(n_a + In), rec.vec(f_a + If)
         if link.parent is None:
@@ -235,26 +236,31 @@ def _coordinate_axis(link: Link) -> tuple[int, int] | None:
     return None
 
 
-def _exact_along_axis(link: Link, tau, W_n: Vec, W_f: Vec, Ia: Inertia,
-                      n_a: Vec, f_a: Vec) -> None:
-    """Put in, for an axis sign * e_j, what the rounding-free algebra knows (in place).
+def _exact_gain(link: Link, W_n: Vec, W_f: Vec) -> None:
+    """For an axis sign * e_j: s^T W = s^T U / D = 1, so W's component j is sign exactly
+    (in place), not the operation D * (1/D)."""
+    found = _coordinate_axis(link)
+    if found is not None:
+        j, sign = found
+        (W_n if link.rotates else W_f)[j] = sign
 
-    I^a s = I^A s - U (s^T U) / D = 0, so the row and column of I^a along the axis vanish;
-    s^T W = s^T U / D = 1 gives W's component sign; and s^T p^a = s^T p^A + u = tau gives
-    p^a's component sign * tau. Left to SymPy these are D * (1/D) and x - x * (D * (1/D)):
-    operations that compute 1 and 0."""
+
+def _exact_articulated(link: Link, tau, Ia: Inertia, n_a: Vec, f_a: Vec) -> None:
+    """For an axis sign * e_j, the exact zeros and torque of I^a and p^a (in place).
+
+    I^a s = I^A s - U (s^T U) / D = 0, so I^a's row and column along the axis vanish; and
+    s^T p^a = s^T p^A + u = tau makes p^a's component j sign * tau. Left to SymPy these
+    would be x - W_j x computed at run time."""
     found = _coordinate_axis(link)
     if found is None:
         return
     j, sign = found
     if link.rotates:
-        W_n[j] = sign
         n_a[j] = sign * tau
         Ia.A[j, :] = sp.zeros(1, 3)
         Ia.A[:, j] = sp.zeros(3, 1)
         Ia.B[j, :] = sp.zeros(1, 3)
     else:
-        W_f[j] = sign
         f_a[j] = sign * tau
         Ia.C[j, :] = sp.zeros(1, 3)
         Ia.C[:, j] = sp.zeros(3, 1)
