@@ -12,7 +12,7 @@ import gagen
 from gagen.model import Body, Joint, Model, inertia_matrix, rotation_from_rpy, vector
 from gagen.model.resolve import resolve_model
 from gagen.runtime.lambdify import LambdifyDynamics
-from gagen.symbolic.aba import forward_dynamics_aba
+from gagen.symbolic.aba import forward_dynamics_aba, forward_dynamics_aba_after
 from gagen.symbolic.recursive import derive_recursive
 
 RTOL = 1e-10
@@ -160,3 +160,20 @@ def test_evaluate_returns_fresh_arrays():
     a = program.evaluate(np.zeros(3), np.zeros(3), np.zeros(3))
     b = program.evaluate(np.zeros(3), np.zeros(3), np.zeros(3))
     assert a is not b and a.shape == (3,)
+
+
+def test_aba_after_recursive_equations_shares_their_definitions():
+    """One program for M, forcing and the ABA: no symbol defined twice, the per-body
+    setup reused, and the same qdd."""
+    model = _model("branched")
+    eqs = derive_recursive(model)
+    alone, after = forward_dynamics_aba(model), forward_dynamics_aba_after(eqs)
+    assert after.intermediates[:len(eqs.intermediates)] == eqs.intermediates
+    symbols = [s for s, _ in after.intermediates]
+    assert len(set(symbols)) == len(symbols)
+    added = len(after.intermediates) - len(eqs.intermediates)
+    assert added < len(alone.intermediates)  # sin, cos, R, d, h and I_O come from eqs
+    rng = np.random.default_rng(12)
+    q, qd, tau = rng.uniform(-2, 2, size=(3, model.dof))
+    np.testing.assert_allclose(after.evaluate(q, qd, tau), alone.evaluate(q, qd, tau),
+                               rtol=RTOL, atol=RTOL)

@@ -53,6 +53,7 @@ import numpy as np
 import sympy as sp
 
 from ..model.model import Model
+from .gibbs_appell import Equations
 from .kinematics import CoordinateSymbols, Recorder
 from .recursive import Link, _links, _skew, _symmetric
 
@@ -105,14 +106,16 @@ class AbaProgram:
     def lambdify(self):
         """A NumPy function f(q, qd, tau, p) -> qdd evaluating the program in order.
 
-        Like the lambdify backend, lambdify sees none of the users' names: arguments
-        become `a<k>` and intermediates `t<k>`."""
+        Only the definitions the qdd need are evaluated. Like the lambdify backend,
+        lambdify sees none of the users' names: arguments become `a<k>` and intermediates
+        `t<k>`."""
         if self._function is None:
             c = self.coords
             flat = [*c.q, *c.qd, *c.tau, *self.parameters]
             rename = {s: sp.Symbol(f"a{k}") for k, s in enumerate(flat)}
-            rename.update({s: sp.Symbol(f"t{k}") for k, (s, _) in enumerate(self.intermediates)})
-            definitions = [(rename[s], e.xreplace(rename)) for s, e in self.intermediates]
+            needed = _needed(self.intermediates, self.qdd)  # not the rest of a shared program
+            rename.update({s: sp.Symbol(f"t{k}") for k, (s, _) in enumerate(needed)})
+            definitions = [(rename[s], e.xreplace(rename)) for s, e in needed]
             outputs = [sp.sympify(e).xreplace(rename) for e in self.qdd]
             self._function = sp.lambdify([rename[s] for s in flat], outputs, modules="numpy",
                                          cse=lambda exprs: (definitions, exprs))
@@ -128,16 +131,31 @@ class AbaProgram:
 
 def forward_dynamics_aba(model: Model) -> AbaProgram:
     """qdd(q, qd, tau) of a model by the articulated-body algorithm (module docstring)."""
-    start = time.perf_counter()
-    coords = CoordinateSymbols.for_model(model)
+    return _program(model, CoordinateSymbols.for_model(model), Recorder())
+
+
+def forward_dynamics_aba_after(eqs: Equations) -> AbaProgram:
+    """The ABA as a continuation of `eqs` (e.g. `derive_recursive`'s), for one program
+    holding both: its intermediates are all of `eqs.intermediates` followed by the new
+    definitions the qdd need, numbered after them (no name is defined twice), and every
+    expression `eqs` already named (sin and cos, joint transforms, inertias) is reused."""
     rec = Recorder()
+    rec.definitions = list(eqs.intermediates)
+    rec._by_expr = {expr: symbol for symbol, expr in eqs.intermediates}
+    return _program(eqs.model, eqs.coords, rec)
+
+
+def _program(model: Model, coords: CoordinateSymbols, rec: Recorder) -> AbaProgram:
+    start = time.perf_counter()
+    given = len(rec.definitions)
     links = _links(model, coords, rec)
     c, bias = _velocity_pass(links, coords, rec)
     U, Dinv, u = _articulated_pass(links, coords, rec, c, bias)
     qdd = _acceleration_pass(links, rec, c, U, Dinv, u, -sp.Matrix(model.gravity), model.dof)
+    new = _needed(rec.definitions, qdd, first=given)
     program = AbaProgram(model=model, coords=coords,
                          parameters=[sp.Symbol(k) for k in model.parameters],
-                         intermediates=_needed(rec.definitions, qdd), qdd=qdd)
+                         intermediates=rec.definitions[:given] + new, qdd=qdd)
     program.seconds = time.perf_counter() - start
     return program
 
@@ -300,10 +318,10 @@ def _acceleration_pass(links: list[Link], rec: Recorder, c: list, U: list, Dinv:
     return qdd
 
 
-def _needed(definitions: list[tuple[sp.Symbol, sp.Expr]],
-            outputs: list[sp.Expr]) -> list[tuple[sp.Symbol, sp.Expr]]:
-    """The definitions the outputs depend on, in definition order."""
-    position = {s: k for k, (s, _) in enumerate(definitions)}
+def _needed(definitions: list[tuple[sp.Symbol, sp.Expr]], outputs: list[sp.Expr],
+            first: int = 0) -> list[tuple[sp.Symbol, sp.Expr]]:
+    """The definitions from index `first` on that the outputs depend on, in order."""
+    position = {s: k for k, (s, _) in enumerate(definitions) if k >= first}
     keep: set[int] = set()
     stack = [s for e in outputs for s in sp.sympify(e).free_symbols if s in position]
     while stack:
