@@ -40,8 +40,12 @@ for a revolute joint and (0, axis) for a prismatic one (axis is constant in fram
 A fixed joint has no motion subspace: its body's I^A and p^A pass to the parent whole
 (c_i = 0), and a_i = X a_p.
 
-Every component is named by an intermediate; 1/D_i once per joint. Definitions that no
-qdd needs (the accelerations of leaves, say) are dropped at the end.
+Every component is named by an intermediate; 1/D_i once per joint. For an axis along a
+coordinate axis (+-e_j, most joints of real robots) the exact consequences of the algebra
+are put in instead of computed: U/D has component +-1, and I^a's row and column along the
+axis are zero (see `_exact_articulated`). Definitions that no qdd needs (the accelerations
+of leaves, say) are dropped at the end. `forward_dynamics_aba_after(eqs)` builds the same
+program as a continuation of `derive_recursive`'s intermediates, for one program with both.
 """
 
 from __future__ import annotations
