@@ -177,3 +177,24 @@ def test_aba_after_recursive_equations_shares_their_definitions():
     q, qd, tau = rng.uniform(-2, 2, size=(3, model.dof))
     np.testing.assert_allclose(after.evaluate(q, qd, tau), alone.evaluate(q, qd, tau),
                                rtol=RTOL, atol=RTOL)
+
+
+@pytest.mark.parametrize("name", ["branched", "panda",
+                                  pytest.param("talos", marks=pytest.mark.slow)])
+def test_aba_equals_pinocchio_aba(name):
+    """An external reference: Pinocchio's own ABA on the same tree (Talos: 44 DOF)."""
+    pytest.importorskip("pinocchio")
+    from reference import numeric_model, pin_forward_dynamics, pin_model
+
+    urdf = {"talos": "talos_full_v2.urdf", "panda": "panda.urdf"}.get(name)
+    model = resolve_model(SHARED_URDF / urdf) if urdf else _model(name)
+    program = forward_dynamics_aba(model)
+    rng = np.random.default_rng(21)
+    for _ in range(2):
+        scale = rng.uniform(0.5, 1.5, size=len(model.parameters))
+        values = dict(zip(model.parameters, model.parameter_vector() * scale))
+        pm = pin_model(numeric_model(model, values))
+        q, qd, tau = rng.uniform(-2, 2, size=(3, model.dof))
+        want = pin_forward_dynamics(pm, q, qd, tau)
+        got = program.evaluate(q, qd, tau, np.array(list(values.values())))
+        np.testing.assert_allclose(got, want, rtol=RTOL, atol=RTOL * max(1.0, np.abs(want).max()))
