@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import sympy as sp
@@ -198,3 +200,19 @@ def test_aba_equals_pinocchio_aba(name):
         want = pin_forward_dynamics(pm, q, qd, tau)
         got = program.evaluate(q, qd, tau, np.array(list(values.values())))
         np.testing.assert_allclose(got, want, rtol=RTOL, atol=RTOL * max(1.0, np.abs(want).max()))
+
+
+def test_pivots_are_positive_and_multiply_to_det_of_mass_matrix():
+    """D_k, one per joint: the pivots of eliminating M leaves first, so prod D_k = det M."""
+    model = _model("branched")
+    program = forward_dynamics_aba(model)
+    assert len(program.pivots) == model.dof
+    as_outputs = dataclasses.replace(program, qdd=program.pivots, _function=None)
+    reference = LambdifyDynamics(derive_recursive(model))
+    rng = np.random.default_rng(6)
+    for _ in range(3):
+        q, qd, tau = rng.uniform(-2, 2, size=(3, model.dof))
+        D = as_outputs.evaluate(q, qd, tau)
+        assert (D > 0).all()
+        det = np.linalg.det(reference.mass_matrix(q))
+        np.testing.assert_allclose(np.prod(D), det, rtol=1e-10)

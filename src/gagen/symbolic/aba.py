@@ -99,6 +99,9 @@ class AbaProgram:
     parameters: list[sp.Symbol]
     intermediates: list[tuple[sp.Symbol, sp.Expr]]
     qdd: list[sp.Expr]
+    # D_k = s^T I^A s per joint k: a rigid tree's are > 0; the generated code can check
+    # them (as its LDL^T checks its pivots) before dividing by them
+    pivots: list[sp.Expr] = field(default_factory=list)
     seconds: float = 0.0
     _function: object = field(default=None, repr=False)
 
@@ -154,12 +157,13 @@ def _program(model: Model, coords: CoordinateSymbols, rec: Recorder) -> AbaProgr
     given = len(rec.definitions)
     links = _links(model, coords, rec)
     c, bias = _velocity_pass(links, coords, rec)
-    U, Dinv, u = _articulated_pass(links, coords, rec, c, bias)
+    U, D, Dinv, u = _articulated_pass(links, coords, rec, c, bias)
     qdd = _acceleration_pass(links, rec, c, U, Dinv, u, -sp.Matrix(model.gravity), model.dof)
     new = _needed(rec.definitions, qdd, first=given)
     program = AbaProgram(model=model, coords=coords,
                          parameters=[sp.Symbol(k) for k in model.parameters],
-                         intermediates=rec.definitions[:given] + new, qdd=qdd)
+                         intermediates=rec.definitions[:given] + new, qdd=qdd,
+                         pivots=[D[i] for i, link in enumerate(links) if link.k is not None])
     program.seconds = time.perf_counter() - start
     return program
 
@@ -210,10 +214,11 @@ def _velocity_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder):
 
 def _articulated_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder,
                       c: list, bias: list):
-    """Articulated inertias and bias forces, leaves to root; per joint U, 1/D and u."""
+    """Articulated inertias and bias forces, leaves to root; per joint U, D, 1/D and u."""
     IA = [_rigid_inertia(link) for link in links]
     pA = [list(b) for b in bias]
     U: list = [None] * len(links)
+    D: list = [None] * len(links)
     Dinv: list = [None] * len(links)
     u: list = [None] * len(links)
     for i in reversed(range(len(links))):
@@ -224,8 +229,8 @@ def _articulated_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorde
         if link.k is not None:
             U_n, U_f = IA[i].times(*_joint_motion(link, 1))
             U_n, U_f = rec.vec(U_n), rec.vec(U_f)
-            D = rec.name(_project(link, U_n, U_f))
-            Dinv[i] = rec.name(1 / D)
+            D[i] = rec.name(_project(link, U_n, U_f))
+            Dinv[i] = rec.name(1 / D[i])
             u[i] = rec.name(coords.tau[link.k] - _project(link, n_i, f_i))
             U[i] = (U_n, U_f)
             if link.parent is None:
@@ -246,7 +251,7 @@ def _articulated_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorde
         n_up = rec.vec(link.R * n_i + link.d.cross(f_up))
         pA[link.parent][0] = pA[link.parent][0] + n_up
         pA[link.parent][1] = pA[link.parent][1] + f_up
-    return U, Dinv, u
+    return U, D, Dinv, u
 
 
 def _coordinate_axis(link: Link) -> tuple[int, int] | None:
