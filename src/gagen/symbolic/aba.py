@@ -1,0 +1,341 @@
+"""Forward dynamics by Featherstone's articulated-body algorithm (ABA), symbolically.
+
+`forward_dynamics_aba(model)` returns a straight-line program: intermediate definitions
+(each a few operations) and the joint accelerations qdd, in the symbols of
+`recursive.derive_recursive` (same q, qd, tau, parameters and per-body setup: joint
+transforms R, d and inertias about the frame origins). Its size is O(n) for chains and
+trees, against O(n * depth) for M by the CRBA plus an O(n^3) LDL^T solve.
+
+Conventions (those of `recursive`). Body i's frame is its joint frame; R holds the parent
+-frame components of its axes and d = O_i - O_parent in the parent's frame. Spatial
+vectors are pairs of 3-vectors in frame i, taken about O_i (Featherstone's convention):
+
+- motion m = (w, v): angular velocity, and velocity of the body point at O_i;
+- force f = (n, f): moment about O_i, and force;
+- acceleration: the time derivative of a motion vector, (alpha, a_O - w x v_O), not the
+  classical acceleration of O_i; gravity enters as the base acceleration (0, -g).
+
+Transforms. A parent motion (w_p, v_p) is, in frame i,
+    w = R^T w_p,   v = R^T (v_p + w_p x d)          i.e. X = [R^T 0; -R^T [d] R^T],
+and a child force (n, f) is, in the parent frame (X^T, the dual),
+    f_p = R f,     n_p = R n + d x f_p.
+A spatial inertia I = [A B; B^T C] (A, C symmetric 3x3, about O_i in frame i) moves to the
+parent as X^T I X, in two steps: rotate each block (A_r = R A R^T, B_r = R B R^T,
+C_r = R C R^T) and shift its reference point from O_i to O_p, with K = B_r [d] and
+Q = [d] C_r:
+    A' = A_r - K - K^T - Q [d],   B' = B_r + Q,   C' = C_r.
+(For one rigid body, A = I_O, B = [h], C = m E, this gives I_O - [h][d] - [d][h] - m[d][d]
+and [h + m d], the CRBA's parallel-axes step.) The rigid body's momentum is
+    I (w, v) = (I_O w + h x v,  m v + w x h).
+
+Spatial cross products: for m = (w, v), m x (a, b) = (w x a, w x b + v x a) on motions and
+m x* (n, f) = (w x n + v x f, w x f) on forces.
+
+Algorithm (Featherstone, RBDA, table 7.1), with s the joint's motion subspace, (axis, 0)
+for a revolute joint and (0, axis) for a prismatic one (axis is constant in frame i):
+  forward:  v_i = X v_p + s qd_i,  c_i = v_i x s qd_i,  p_i = v_i x* I_i v_i;
+  backward: U_i = I^A_i s, D_i = s^T U_i, u_i = tau_i - s^T p^A_i, and into the parent
+            I^a = I^A_i - U_i U_i^T / D_i,  p^a = p^A_i + I^a c_i + U_i u_i / D_i;
+  forward:  a'_i = X a_p + c_i,  qdd_i = (u_i - U_i^T a'_i) / D_i,  a_i = a'_i + s qdd_i.
+A fixed joint has no motion subspace: its body's I^A and p^A pass to the parent whole
+(c_i = 0), and a_i = X a_p.
+
+Every component is named by an intermediate; 1/D_i once per joint. For an axis along a
+coordinate axis (+-e_j, most joints of real robots) the exact consequences of the algebra
+are put in instead of computed: U/D has component +-1, and I^a's row and column along the
+axis are zero (see `_exact_articulated`). Definitions that no qdd needs (the accelerations
+of leaves, say) are dropped at the end. `forward_dynamics_aba_after(eqs)` builds the same
+program as a continuation of `derive_recursive`'s intermediates, for one program with both.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import sympy as sp
+
+from ..model.model import Model
+from .gibbs_appell import Equations
+from .kinematics import CoordinateSymbols, Recorder
+from .recursive import Link, _links, _skew, _symmetric
+
+Vec = sp.Matrix
+ZERO = sp.zeros(3, 1)
+
+
+@dataclass
+class Inertia:
+    """A spatial inertia [A B; B^T C] about a frame's origin, in that frame's axes."""
+
+    A: sp.Matrix   # symmetric
+    B: sp.Matrix
+    C: sp.Matrix   # symmetric
+
+    def __add__(self, other: Inertia) -> Inertia:
+        return Inertia(self.A + other.A, self.B + other.B, self.C + other.C)
+
+    def named(self, rec: Recorder) -> Inertia:
+        """The 21 distinct entries named."""
+        return Inertia(_symmetric(self.A, rec), self.B.applyfunc(rec.name),
+                       _symmetric(self.C, rec))
+
+    def times(self, w: Vec, v: Vec) -> tuple[Vec, Vec]:
+        """I (w, v): the force (moment, force) of a motion."""
+        return self.A * w + self.B * v, self.B.T * w + self.C * v
+
+
+@dataclass
+class AbaProgram:
+    """The articulated-body forward dynamics as a straight-line program.
+
+    `qdd[k]` is an expression (here a symbol of `intermediates`) in q, qd, tau and the
+    parameters; each intermediate is defined from the earlier ones.
+    """
+
+    model: Model
+    coords: CoordinateSymbols
+    parameters: list[sp.Symbol]
+    intermediates: list[tuple[sp.Symbol, sp.Expr]]
+    qdd: list[sp.Expr]
+    # D_k = s^T I^A s per joint k: a rigid tree's are > 0; the generated code can check
+    # them (as its LDL^T checks its pivots) before dividing by them
+    pivots: list[sp.Expr] = field(default_factory=list)
+    seconds: float = 0.0
+    _function: object = field(default=None, repr=False)
+
+    def operation_count(self) -> int:
+        """`sympy.count_ops` over the intermediates and the outputs."""
+        return (sum(sp.count_ops(e) for _, e in self.intermediates)
+                + sum(sp.count_ops(e) for e in self.qdd))
+
+    def lambdify(self):
+        """A NumPy function f(q, qd, tau, p) -> qdd evaluating the program in order.
+
+        Only the definitions the qdd need are evaluated. Like the lambdify backend,
+        lambdify sees none of the users' names: arguments become `a<k>` and intermediates
+        `t<k>`."""
+        if self._function is None:
+            c = self.coords
+            flat = [*c.q, *c.qd, *c.tau, *self.parameters]
+            rename = {s: sp.Symbol(f"a{k}") for k, s in enumerate(flat)}
+            needed = _needed(self.intermediates, self.qdd)  # not the rest of a shared program
+            rename.update({s: sp.Symbol(f"t{k}") for k, (s, _) in enumerate(needed)})
+            definitions = [(rename[s], e.xreplace(rename)) for s, e in needed]
+            outputs = [sp.sympify(e).xreplace(rename) for e in self.qdd]
+            self._function = sp.lambdify([rename[s] for s in flat], outputs, modules="numpy",
+                                         cse=lambda exprs: (definitions, exprs))
+        return self._function
+
+    def evaluate(self, q, qd, tau, p=None) -> np.ndarray:
+        """qdd at one state (p: the parameter vector, default the model's)."""
+        p = self.model.parameter_vector() if p is None else np.asarray(p, dtype=float)
+        values = self.lambdify()(*np.asarray(q, float), *np.asarray(qd, float),
+                                 *np.asarray(tau, float), *p)
+        return np.array(values, dtype=float)
+
+
+def forward_dynamics_aba(model: Model) -> AbaProgram:
+    """qdd(q, qd, tau) of a model by the articulated-body algorithm (module docstring)."""
+    return _program(model, CoordinateSymbols.for_model(model), Recorder())
+
+
+def forward_dynamics_aba_after(eqs: Equations) -> AbaProgram:
+    """The ABA as a continuation of `eqs` (e.g. `derive_recursive`'s), for one program
+    holding both: its intermediates are all of `eqs.intermediates` followed by the new
+    definitions the qdd need, numbered after them (no name is defined twice), and every
+    expression `eqs` already named (sin and cos, joint transforms, inertias) is reused."""
+    rec = Recorder()
+    rec.definitions = list(eqs.intermediates)
+    rec._by_expr = {expr: symbol for symbol, expr in eqs.intermediates}
+    return _program(eqs.model, eqs.coords, rec)
+
+
+def _program(model: Model, coords: CoordinateSymbols, rec: Recorder) -> AbaProgram:
+    start = time.perf_counter()
+    given = len(rec.definitions)
+    links = _links(model, coords, rec)
+    c, bias = _velocity_pass(links, coords, rec)
+    U, D, Dinv, u = _articulated_pass(links, coords, rec, c, bias)
+    qdd = _acceleration_pass(links, rec, c, U, Dinv, u, -sp.Matrix(model.gravity), model.dof)
+    new = _needed(rec.definitions, qdd, first=given)
+    program = AbaProgram(model=model, coords=coords,
+                         parameters=[sp.Symbol(k) for k in model.parameters],
+                         intermediates=rec.definitions[:given] + new, qdd=qdd,
+                         pivots=[D[i] for i, link in enumerate(links) if link.k is not None])
+    program.seconds = time.perf_counter() - start
+    return program
+
+
+def _rigid_inertia(link: Link) -> Inertia:
+    return Inertia(link.I_O, _skew(link.h), link.mass * sp.eye(3))
+
+
+def _joint_motion(link: Link, rate) -> tuple[Vec, Vec]:
+    """s * rate as (angular, linear); zero for a fixed joint."""
+    if link.k is None:
+        return ZERO, ZERO
+    if link.rotates:
+        return link.axis * rate, ZERO
+    return ZERO, link.axis * rate
+
+
+def _project(link: Link, n: Vec, f: Vec) -> sp.Expr:
+    """s^T (n, f): the component of a force along the joint's motion subspace."""
+    return link.axis.dot(n if link.rotates else f)
+
+
+def _motion_to_child(link: Link, w_p: Vec, v_p: Vec, rec: Recorder) -> tuple[Vec, Vec]:
+    """X (w_p, v_p): a parent-frame motion (or spatial acceleration) in this frame."""
+    return link.to_child(w_p, rec), link.to_child(v_p + w_p.cross(link.d), rec)
+
+
+def _velocity_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder):
+    """Velocity-product accelerations c_i and bias forces p_i = v_i x* I_i v_i."""
+    v: list[tuple[Vec, Vec]] = []
+    c: list[tuple[Vec, Vec]] = []
+    bias: list[tuple[Vec, Vec]] = []
+    for link in links:
+        if link.parent is None:
+            w_in, v_in = ZERO, ZERO
+        else:
+            w_in, v_in = _motion_to_child(link, *v[link.parent], rec)
+        s_w, s_v = _joint_motion(link, coords.qd[link.k] if link.k is not None else 0)
+        w, vel = rec.vec(w_in + s_w), rec.vec(v_in + s_v)
+        # v_i x (s qd) = (w x s_w, w x s_v + v x s_w); s x s = 0 lets w_in stand for w
+        c.append((rec.vec(w_in.cross(s_w)), rec.vec(w_in.cross(s_v) + v_in.cross(s_w))))
+        v.append((w, vel))
+        L, P = _rigid_inertia(link).times(w, vel)
+        L, P = rec.vec(L), rec.vec(P)
+        bias.append((rec.vec(w.cross(L) + vel.cross(P)), rec.vec(w.cross(P))))
+    return c, bias
+
+
+def _articulated_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder,
+                      c: list, bias: list):
+    """Articulated inertias and bias forces, leaves to root; per joint U, D, 1/D and u."""
+    IA = [_rigid_inertia(link) for link in links]
+    pA = [list(b) for b in bias]
+    U: list = [None] * len(links)
+    D: list = [None] * len(links)
+    Dinv: list = [None] * len(links)
+    u: list = [None] * len(links)
+    for i in reversed(range(len(links))):
+        link = links[i]
+        IA[i] = IA[i].named(rec)
+        n_i, f_i = rec.vec(pA[i][0]), rec.vec(pA[i][1])
+        Ia = IA[i]
+        if link.k is not None:
+            U_n, U_f = IA[i].times(*_joint_motion(link, 1))
+            U_n, U_f = rec.vec(U_n), rec.vec(U_f)
+            D[i] = rec.name(_project(link, U_n, U_f))
+            Dinv[i] = rec.name(1 / D[i])
+            u[i] = rec.name(coords.tau[link.k] - _project(link, n_i, f_i))
+            U[i] = (U_n, U_f)
+            if link.parent is None:
+                continue
+            W_n, W_f = rec.vec(U_n * Dinv[i]), rec.vec(U_f * Dinv[i])  # U / D
+            _exact_gain(link, W_n, W_f)
+            Ia = Inertia(IA[i].A - W_n * U_n.T, IA[i].B - W_n * U_f.T, IA[i].C - W_f * U_f.T)
+            n_a, f_a = n_i + W_n * u[i], f_i + W_f * u[i]
+            _exact_articulated(link, coords.tau[link.k], Ia, n_a, f_a)
+            Ia = Ia.named(rec)
+            In, If = Ia.times(*c[i])
+            n_i, f_i = rec.vec(n_a + In), rec.vec(f_a + If)
+        if link.parent is None:
+            continue
+        up = _inertia_to_parent(link, Ia, rec)
+        IA[link.parent] = IA[link.parent] + up
+        f_up = link.to_parent(f_i, rec)
+        n_up = rec.vec(link.R * n_i + link.d.cross(f_up))
+        pA[link.parent][0] = pA[link.parent][0] + n_up
+        pA[link.parent][1] = pA[link.parent][1] + f_up
+    return U, D, Dinv, u
+
+
+def _coordinate_axis(link: Link) -> tuple[int, int] | None:
+    """(j, sign) when the joint axis is sign * e_j, else None."""
+    nonzero = [j for j, a in enumerate(link.axis) if a != 0]
+    if len(nonzero) == 1 and abs(link.axis[nonzero[0]]) == 1:
+        j = nonzero[0]
+        return j, (1 if link.axis[j] > 0 else -1)
+    return None
+
+
+def _exact_gain(link: Link, W_n: Vec, W_f: Vec) -> None:
+    """For an axis sign * e_j: s^T W = s^T U / D = 1, so W's component j is sign exactly
+    (in place), not the operation D * (1/D)."""
+    found = _coordinate_axis(link)
+    if found is not None:
+        j, sign = found
+        (W_n if link.rotates else W_f)[j] = sign
+
+
+def _exact_articulated(link: Link, tau, Ia: Inertia, n_a: Vec, f_a: Vec) -> None:
+    """For an axis sign * e_j, the exact zeros and torque of I^a and p^a (in place).
+
+    I^a s = I^A s - U (s^T U) / D = 0, so I^a's row and column along the axis vanish; and
+    s^T p^a = s^T p^A + u = tau makes p^a's component j sign * tau. Left to SymPy these
+    would be x - W_j x computed at run time."""
+    found = _coordinate_axis(link)
+    if found is None:
+        return
+    j, sign = found
+    if link.rotates:
+        n_a[j] = sign * tau
+        Ia.A[j, :] = sp.zeros(1, 3)
+        Ia.A[:, j] = sp.zeros(3, 1)
+        Ia.B[j, :] = sp.zeros(1, 3)
+    else:
+        f_a[j] = sign * tau
+        Ia.C[j, :] = sp.zeros(1, 3)
+        Ia.C[:, j] = sp.zeros(3, 1)
+        Ia.B[:, j] = sp.zeros(3, 1)
+
+
+def _inertia_to_parent(link: Link, I: Inertia, rec: Recorder) -> Inertia:
+    """X^T I X: rotate the blocks into the parent's axes, then shift to O_parent."""
+    R = link.R
+    A_r = _symmetric((R * I.A).applyfunc(rec.name) * R.T, rec)
+    B_r = ((R * I.B).applyfunc(rec.name) * R.T).applyfunc(rec.name)
+    C_r = _symmetric((R * I.C).applyfunc(rec.name) * R.T, rec)
+    d = _skew(link.d)
+    K = (B_r * d).applyfunc(rec.name)
+    Q = (d * C_r).applyfunc(rec.name)
+    A = _symmetric(A_r - K - K.T - Q * d, rec)
+    return Inertia(A, (B_r + Q).applyfunc(rec.name), C_r)
+
+
+def _acceleration_pass(links: list[Link], rec: Recorder, c: list, U: list, Dinv: list,
+                       u: list, base: Vec, dof: int) -> list[sp.Expr]:
+    """Spatial accelerations root to leaves, with each joint's qdd on the way."""
+    acc: list[tuple[Vec, Vec]] = []
+    qdd: list[sp.Expr] = [sp.Integer(0)] * dof
+    for i, link in enumerate(links):
+        if link.parent is None:
+            alpha, a = ZERO, link.to_child(base, rec)
+        else:
+            alpha, a = _motion_to_child(link, *acc[link.parent], rec)
+        alpha, a = rec.vec(alpha + c[i][0]), rec.vec(a + c[i][1])
+        if link.k is not None:
+            U_n, U_f = U[i]
+            qdd[link.k] = rec.name(Dinv[i] * (u[i] - U_n.dot(alpha) - U_f.dot(a)))
+            s_w, s_v = _joint_motion(link, qdd[link.k])
+            alpha, a = rec.vec(alpha + s_w), rec.vec(a + s_v)
+        acc.append((alpha, a))
+    return qdd
+
+
+def _needed(definitions: list[tuple[sp.Symbol, sp.Expr]], outputs: list[sp.Expr],
+            first: int = 0) -> list[tuple[sp.Symbol, sp.Expr]]:
+    """The definitions from index `first` on that the outputs depend on, in order."""
+    position = {s: k for k, (s, _) in enumerate(definitions) if k >= first}
+    keep: set[int] = set()
+    stack = [s for e in outputs for s in sp.sympify(e).free_symbols if s in position]
+    while stack:
+        k = position[stack.pop()]
+        if k not in keep:
+            keep.add(k)
+            stack.extend(s for s in definitions[k][1].free_symbols if s in position)
+    return [definitions[k] for k in sorted(keep)]
