@@ -57,6 +57,8 @@ import numpy as np
 import sympy as sp
 
 from ..model.model import Model
+from .differentiate import needed_definitions as _needed
+from .differentiate import recorder_after
 from .gibbs_appell import Equations
 from .kinematics import CoordinateSymbols, Recorder
 from .recursive import Link, _links, _skew, _symmetric
@@ -146,10 +148,7 @@ def forward_dynamics_aba_after(eqs: Equations) -> AbaProgram:
     holding both: its intermediates are all of `eqs.intermediates` followed by the new
     definitions the qdd need, numbered after them (no name is defined twice), and every
     expression `eqs` already named (sin and cos, joint transforms, inertias) is reused."""
-    rec = Recorder()
-    rec.definitions = list(eqs.intermediates)
-    rec._by_expr = {expr: symbol for symbol, expr in eqs.intermediates}
-    return _program(eqs.model, eqs.coords, rec)
+    return _program(eqs.model, eqs.coords, recorder_after(eqs.intermediates))
 
 
 def _program(model: Model, coords: CoordinateSymbols, rec: Recorder) -> AbaProgram:
@@ -325,17 +324,3 @@ def _acceleration_pass(links: list[Link], rec: Recorder, c: list, U: list, Dinv:
             alpha, a = rec.vec(alpha + s_w), rec.vec(a + s_v)
         acc.append((alpha, a))
     return qdd
-
-
-def _needed(definitions: list[tuple[sp.Symbol, sp.Expr]], outputs: list[sp.Expr],
-            first: int = 0) -> list[tuple[sp.Symbol, sp.Expr]]:
-    """The definitions from index `first` on that the outputs depend on, in order."""
-    position = {s: k for k, (s, _) in enumerate(definitions) if k >= first}
-    keep: set[int] = set()
-    stack = [s for e in outputs for s in sp.sympify(e).free_symbols if s in position]
-    while stack:
-        k = position[stack.pop()]
-        if k not in keep:
-            keep.add(k)
-            stack.extend(s for s in definitions[k][1].free_symbols if s in position)
-    return [definitions[k] for k in sorted(keep)]
