@@ -387,4 +387,18 @@ GAGEN_TRIG_INLINE double gagen_cos(double x)
 #endif
 #endif
 
+/*
+ * GAGEN_HIDDEN marks the segment functions of split kernels (codegen/segments.py): they
+ * link between the model's own files but are not exported from its module.  GAGEN_SEGMENT
+ * is their other attributes (none by default).
+ */
+#if defined(__GNUC__) || defined(__clang__)
+#define GAGEN_HIDDEN __attribute__((visibility("hidden")))
+#else
+#define GAGEN_HIDDEN
+#endif
+#ifndef GAGEN_SEGMENT
+#define GAGEN_SEGMENT
+#endif
+
 #endif /* GAGEN_MATH_H */

@@ -4,7 +4,7 @@
 #include "gagen_math.h"
 #include "rrr.h"
 
-/* The two stages have 219 operations: few enough to go inline into every stage of
+/* The two stages have 215 operations: few enough to go inline into every stage of
  * the integrators, which spares a call (and the spilling of the integrator's registers)
  * per stage. Larger models call them instead, as a dozen copies would compile slowly. */
 #if defined(__GNUC__) || defined(__clang__)
@@ -20,8 +20,7 @@
 GAGEN_STAGE
 int gagen_so_position(const double *restrict q, const double *restrict p, double *restrict S)
 {
-    double *const G = S + 23, *const Dinv = S + 26;
-    double *const M = S + 29;
+    double *const Dinv = S + 26, *const M = S + 29;
     double sn1, cs1, sn2, cs2;
     gagen_sincos2(q[1], q[2], &sn1, &cs1, &sn2, &cs2);
     const double t4 = (1.0/2.0)*p[2];
@@ -64,15 +63,15 @@ int gagen_so_position(const double *restrict q, const double *restrict p, double
     const double t79 = 2*t77;
     const double t80 = t66*t78;
     const double t81 = t65 + t80 + t33;
-    M[0] = t40*t40*p[5] + t47*t47*p[14] + (t49*t49*p[15] + t14*t14*p[12]) + (t18*t18*p[11] + t75*t75*p[6] + (t6 + p[9]));
-    M[3] = 0;
-    M[4] = t7*(2*t52*t52 + 2*t77*t77) + p[10] + (p[13] + (1.0/4.0)*p[2]*p[2]*p[5]);
-    M[6] = 0;
-    M[7] = t5*t78 + p[13];
-    M[8] = p[13] + (1.0/4.0)*p[3]*p[3]*p[6];
-    G[0] = 0;
-    G[1] = -t81;
-    G[2] = t68;
+    S[29] = t40*t40*p[5] + t47*t47*p[14] + (t49*t49*p[15] + t14*t14*p[12]) + (t18*t18*p[11] + t75*t75*p[6] + (t6 + p[9]));
+    S[32] = 0;
+    S[33] = t7*(2*t52*t52 + 2*t77*t77) + p[10] + (p[13] + (1.0/4.0)*p[2]*p[2]*p[5]);
+    S[35] = 0;
+    S[36] = t5*t78 + p[13];
+    S[37] = p[13] + (1.0/4.0)*p[3]*p[3]*p[6];
+    S[23] = 0;
+    S[24] = -t81;
+    S[25] = t68;
     S[0] = t4;
     S[1] = t5;
     S[2] = t7;
@@ -120,10 +119,10 @@ int gagen_so_position(const double *restrict q, const double *restrict p, double
     return 0;
 }
 
-/* The rest: qdd at velocities qd under the joint torques u, given S = position stage of q. */
+/* The rest: qdd at velocities qd under the joint torques tau, given S = position stage of q. */
 GAGEN_STAGE
 void gagen_so_velocity(const double *restrict S, const double *restrict q,
-                       const double *restrict qd, const double *restrict u,
+                       const double *restrict qd, const double *restrict tau,
                        const double *restrict p, double *restrict qdd)
 {
     const double *const Dinv = S + 26, *const M = S + 29;
@@ -202,9 +201,9 @@ void gagen_so_velocity(const double *restrict S, const double *restrict q,
     F[0] = -t37*t20 - t38*t17 + (-t42*t41 - t73*t48) + (-t74*t50 - t82*t76 - t101);
     F[1] = -t44*t8 - t90 - t7*(t83*t53 + t84*t79) + (t97 + t81);
     F[2] = -t84*t9 + t97 + t67;
-    F[0] += u[0];
-    F[1] += u[1];
-    F[2] += u[2];
+    F[0] += tau[0];
+    F[1] += tau[1];
+    F[2] += tau[2];
     /* L y = F with z = D^-1 y (L = U D^-1, so y_i = F_i - sum U_ik z_k), then
        L^T qdd = z, i.e. qdd_i = (y_i - sum U_ki qdd_k) / D_i */
     double z[3];

@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import __version__
-from ..codegen.render import MODEL_C_FILES, c_identifier, generate, write_sources
+from ..codegen.config import CodegenConfig
+from ..codegen.render import c_identifier, generate, write_sources
 from ..errors import BuildError, CompilerNotFoundError
 from ..model.model import Model
 from ..runtime.compiled import CompiledDynamics
@@ -63,12 +64,16 @@ class BuildReport:
     cached: bool = False
 
 
-def source_key(model: Model, derivation: str = "auto") -> str:
+def source_key(model: Model, derivation: str = "auto", config: CodegenConfig | None = None
+               ) -> str:
     """Hash of what the generated sources depend on: model, parameter names, the derivation
-    used, the generator's code and templates."""
+    used, the generator's code and templates, and the codegen's settings if not the default."""
     h = hashlib.sha256()
-    for part in (model.canonical(), ",".join(model.parameters), __version__, generator_digest(),
-                 derivation_for(model, derivation)):
+    parts = [model.canonical(), ",".join(model.parameters), __version__, generator_digest(),
+             derivation_for(model, derivation)]
+    if config is not None and config != CodegenConfig():
+        parts.append(repr(config))
+    for part in parts:
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
@@ -102,6 +107,10 @@ class Progress:
         extra = f"  {detail}" if detail else ""
         self.say(f"{name:<9} {seconds:7.2f} s{extra}")
 
+    def files(self, done: int, total: int) -> None:
+        """A compile job finished (Cython's, or one C file's)."""
+        self.say(f"compiled {done}/{total}")
+
     def say(self, text: str) -> None:
         # imported here: a cached load never builds, and never pays for importing logging
         import logging
@@ -113,9 +122,11 @@ class Progress:
 
 
 def generate_sources(model: Model, folder: Path, progress: Progress | None = None,
-                     report: BuildReport | None = None, derivation: str = "auto") -> BuildReport:
-    """Derive and generate a model's sources into `folder` (no compilation)."""
-    key = source_key(model, derivation)
+                     report: BuildReport | None = None, derivation: str = "auto",
+                     config: CodegenConfig | None = None) -> BuildReport:
+    """Derive and generate a model's sources into `folder` (no compilation); `config` is
+    the code generator's settings (default: CodegenConfig())."""
+    key = source_key(model, derivation, config)
     name = module_name_for(model, key)
     report = report or BuildReport(model.name, name, folder)
     progress = progress or Progress(report, verbose=False)
@@ -127,7 +138,7 @@ def generate_sources(model: Model, folder: Path, progress: Progress | None = Non
                    f"{model.dof} coordinates, {len(eqs.intermediates)} intermediates")
     progress.say("generating C (one CSE pass over every output)...")
     start = time.perf_counter()
-    code = generate(eqs, name, key)
+    code = generate(eqs, name, key, config)
     write_sources(code, folder)
     report.ops_before_cse, report.ops_after_cse = code.ops_before, code.ops_after
     progress.stage("generate", time.perf_counter() - start,
@@ -169,8 +180,8 @@ def _env_words(name: str) -> list[str]:
         return []
 
 
-def _compile_commands(cc: list[str], folder: Path, module_name: str,
-                      flags: list[str]) -> list[list[str]]:
+def _compile_commands(cc: list[str], folder: Path, sources: list[str],
+                      flags: list[str]) -> dict[str, list[str]]:
     """One compiler command per C file (largest first, so the biggest overlaps the rest).
 
     Python's own flags (CFLAGS, CCSHARED) as distutils would use them, then $CFLAGS and
@@ -185,12 +196,22 @@ def _compile_commands(cc: list[str], folder: Path, module_name: str,
     python_flags = [w for w in _config_words("CFLAGS") if w != "-g"]
     base = [*cc, *python_flags, *_config_words("CCSHARED"), *_env_words("CPPFLAGS"),
             *_env_words("CFLAGS"), *includes, "-DNPY_NO_DEPRECATED_API=NPY_1_7_API_VERSION"]
-    sources = sorted([f"{module_name}.c", *MODEL_C_FILES],
-                     key=lambda name: -(folder / name).stat().st_size)
-    return [[*base, "-c", source, "-o", f"{source}.o", *flags] for source in sources]
+
+    def size(name: str) -> int:
+        path = folder / name
+        return path.stat().st_size if path.exists() else 0
+
+    ordered = sorted(set(sources), key=lambda name: (-size(name), name))
+    return {source: [*base, "-c", source, "-o", f"{source}.o", *flags] for source in ordered}
 
 
-def _link_command(cc: list[str], module_name: str, suffix: str) -> list[str]:
+def _c_files(folder: Path) -> list[str]:
+    """Every C file of a build folder: Cython's output, the model's kernels (their number
+    grows with the model: codegen/segments.py) and gagen's integrator."""
+    return sorted(path.name for path in folder.glob("*.c"))
+
+
+def _link_command(cc: list[str], folder: Path, module_name: str, suffix: str) -> list[str]:
     """The link command as distutils builds it: $LDSHARED, else Python's LDSHARED with its
     compiler replaced by $CC when that is set."""
     ldshared = os.environ.get("LDSHARED", "").strip() or sysconfig.get_config_var("LDSHARED") or ""
@@ -198,51 +219,98 @@ def _link_command(cc: list[str], module_name: str, suffix: str) -> list[str]:
     if os.environ.get("CC", "").strip() and python_cc and ldshared.startswith(python_cc):
         ldshared = shlex.join(cc) + ldshared[len(python_cc):]
     linker = shlex.split(ldshared) or [*cc, "-shared"]
-    objects = [f"{source}.o" for source in (f"{module_name}.c", *MODEL_C_FILES)]
+    objects = [f"{source}.o" for source in _c_files(folder)]
     return [*linker, *_env_words("LDFLAGS"), *objects, "-o", f"{module_name}{suffix}", "-lm"]
 
 
-def _run_tool(commands: list[list[str]], folder: Path, what: str, workers: int = 2) -> None:
-    """Run commands in `folder`, `workers` at a time; BuildError with their own output."""
+@dataclass
+class Job:
+    """A command of the build; `then` is a job that may start once this one succeeded."""
+
+    command: list[str]
+    what: str
+    then: Job | None = None
+
+
+def _run_jobs(jobs: list[Job], folder: Path, workers: int = 2, progress=None) -> None:
+    """Run jobs in `folder`, `workers` at a time, each as soon as a worker is free (a job's
+    `then` first in line once it succeeded). BuildError with the tools' own output; on any
+    interruption the tools still running are stopped. `progress(done, total)` is called
+    as jobs finish."""
     failures = []
-    pending = list(commands)
-    running: list[tuple[list[str], subprocess.Popen]] = []
+    pending = list(jobs)
+    total = len(jobs) + sum(_chain_length(job) for job in jobs)
+    done = 0
+    running: list[tuple[Job, subprocess.Popen, object]] = []
     try:
         while pending or running:
-            while pending and len(running) < workers:
-                command = pending.pop(0)
-                running.append((command, subprocess.Popen(
-                    command, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                    text=True, errors="replace")))
-            command, proc = running.pop(0)
-            output, _ = proc.communicate()
-            if proc.returncode != 0:
-                failures.append(f"$ {' '.join(command[:1] + command[-6:])}\n{output.strip()}")
+            while pending and len(running) < workers and not failures:
+                job = pending.pop(0)
+                log = tempfile.TemporaryFile(mode="w+", errors="replace")
+                running.append((job, subprocess.Popen(job.command, cwd=folder, stdout=log,
+                                                      stderr=subprocess.STDOUT), log))
+            if not running:
+                break
+            finished = [item for item in running if item[1].poll() is not None]
+            if not finished:
+                time.sleep(0.02)
+                continue
+            for item in finished:
+                running.remove(item)
+                job, proc, log = item
+                log.seek(0)
+                output = log.read()
+                log.close()
+                done += 1
+                if proc.returncode != 0:
+                    failures.append((job, output))
+                elif job.then is not None:
+                    pending.insert(0, job.then)
+                if progress is not None:
+                    progress(done, total)
     finally:
-        for _, proc in running:  # interrupted: stop the compilers still running
+        for _, proc, log in running:  # interrupted: stop the tools still running
             proc.kill()
             proc.wait()
+            log.close()
     if failures:
-        shown = "\n".join(failures)
+        job = failures[0][0]
+        shown = "\n".join(f"$ {' '.join(j.command[:1] + j.command[-6:])}\n{out.strip()}"
+                          for j, out in failures)
         lines = shown.splitlines()
         if len(lines) > 60:
             shown = "\n".join(lines[:60] + [f"... ({len(lines) - 60} more lines)"])
-        raise BuildError(f"{what} failed in {folder}:\n{shown}")
+        raise BuildError(f"{job.what} failed in {folder}:\n{shown}")
 
 
-def compile_sources(folder: Path, module_name: str, flags: list[str], verbose: bool) -> Path:
+def _chain_length(job: Job) -> int:
+    count = 0
+    while job.then is not None:
+        job, count = job.then, count + 1
+    return count
+
+
+def compile_sources(folder: Path, module_name: str, flags: list[str], verbose: bool,
+                    progress=None) -> Path:
     """Cythonize and compile the sources in `folder`; return the module's path.
 
-    Cython runs as `python -m cython`; the C files are compiled two at a time with the
-    compiler Python was built with (or $CC), then linked. A failure raises BuildError with
-    the tool's own messages, never a traceback of gagen's.
+    Cython runs as `python -m cython` while the compiler (the one Python was built with,
+    or $CC) starts on the model's C files, as many at a time as there are cores; Cython's
+    output is compiled as soon as it is written. Then the objects are linked. A failure
+    raises BuildError with the tool's own messages, never a traceback of gagen's.
+    `progress(done, total)` is called as files are compiled.
     """
     cc = check_compiler()
     suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
-    _run_tool([[sys.executable, "-m", "cython", "-3", "--fast-fail", f"{module_name}.pyx",
-                "-o", f"{module_name}.c"]], folder, f"Cython on {module_name}.pyx")
-    _run_tool(_compile_commands(cc, folder, module_name, flags), folder, f"compiling {module_name}")
-    _run_tool([_link_command(cc, module_name, suffix)], folder, f"linking {module_name}")
+    wrapper = f"{module_name}.c"
+    compile_jobs = {source: Job(command, f"compiling {module_name}") for source, command in
+                    _compile_commands(cc, folder, [*_c_files(folder), wrapper], flags).items()}
+    cython = Job([sys.executable, "-m", "cython", "-3", "--fast-fail", f"{module_name}.pyx",
+                  "-o", wrapper], f"Cython on {module_name}.pyx", then=compile_jobs.pop(wrapper))
+    _run_jobs([cython, *compile_jobs.values()], folder, workers=build_workers(),
+              progress=progress)
+    _run_jobs([Job(_link_command(cc, folder, module_name, suffix), f"linking {module_name}")],
+              folder)
     path = folder / f"{module_name}{suffix}"
     if not path.exists():
         raise BuildError(f"the compiler reported success but {path} is missing")
@@ -251,17 +319,30 @@ def compile_sources(folder: Path, module_name: str, flags: list[str], verbose: b
     return path
 
 
+def build_workers() -> int:
+    """How many compilers run at once: $GAGEN_BUILD_JOBS, else the cores this process may use."""
+    value = os.environ.get("GAGEN_BUILD_JOBS", "").strip()
+    if value.isdigit() and int(value) > 0:
+        return int(value)
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
 def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
           fast_math: bool = False, verbose: bool = False, portable: bool = False,
-          derivation: str = "auto") -> tuple[Path, BuildReport]:
+          derivation: str = "auto", config: CodegenConfig | None = None
+          ) -> tuple[Path, BuildReport]:
     """Derive, generate and compile; return the extension's path and what was done.
 
-    With `out`, the sources and the module are written there. Otherwise the cache is used:
+    With `out`, the sources and the module are written there. Otherwise the cache is used
+    (its key covers `config`, the code generator's settings, when not the default):
     an entry whose module matches its stored checksum is reused as it is; a corrupt or
     incomplete one is rebuilt with a CacheWarning.
     """
     flags = compile_flags(fast_math, portable)
-    src_key = source_key(model, derivation)
+    src_key = source_key(model, derivation, config)
     name = module_name_for(model, src_key)
     suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
     if out is None:
@@ -284,11 +365,12 @@ def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
     tmp = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=final.parent))
     try:
         (tmp / _OWNER_FILE).write_text(f"{socket.gethostname()} {os.getpid()}\n")
-        generate_sources(model, tmp, progress, report, derivation)
+        generate_sources(model, tmp, progress, report, derivation, config)
+        workers = build_workers()
         progress.say(f"compiling with {' '.join(flags)} (Cython and the C compiler, "
-                     "usually 5-15 s)...")
+                     f"{workers} at a time)...")
         start = time.perf_counter()
-        module = compile_sources(tmp, name, flags, verbose)
+        module = compile_sources(tmp, name, flags, verbose, progress=progress.files)
         if out is None:  # the cache checks its modules before import; an --out folder is the user's
             (tmp / _CHECKSUM_FILE).write_text(_checksum(module))
         (tmp / _OWNER_FILE).unlink()

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .segments import FILE_CHARS, SEGMENT_CHARS, SPLIT_CHARS
+
 # Stages of at most this many operations go inline into each of the integrators' stages
 # (a dozen copies): measured, larger ones compile slowly for no gain (docs/benchmarks.md).
 INLINE_STAGE_OPS = 400
@@ -17,7 +19,20 @@ class CodegenConfig:
                        the integrators when they have at most this many operations
     fast_trig          sin and cos from gagen_math.h (within 1 ulp, about twice as fast as
                        libm's) instead of libm's
+    split_chars        a kernel with more characters of C than this is split into segment
+                       functions (codegen/segments.py)
+    segment_chars      ... into segments of about this many characters each
+    file_chars         the segment functions go into files of about this many characters
+    cse                sympy.cse over the intermediates and outputs (False: the derivation's
+                       own named intermediates as they are; None: for the Gibbs-Appell form
+                       only. The recursive form names every per-body quantity once already:
+                       on a 50-link chain CSE removed 6 % of the operations, left the speed
+                       per call unchanged, and took more than half of the generation time)
     """
 
     inline_stage_ops: int = INLINE_STAGE_OPS
     fast_trig: bool = True
+    split_chars: int = SPLIT_CHARS
+    segment_chars: int = SEGMENT_CHARS
+    cse: bool | None = None
+    file_chars: int = FILE_CHARS

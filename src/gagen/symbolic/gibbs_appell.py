@@ -50,6 +50,12 @@ class Equations:
     potential_energy: sp.Expr
     kinematics: list[BodyKinematics] = field(repr=False, default_factory=list)
     seconds: float = 0.0
+    # qdd by the articulated-body algorithm (symbolic/aba.py), when the derivation wrote it;
+    # else forward dynamics is M \\ forcing. `pivots` are its D_k = s^T I^A s, positive
+    # exactly when M is positive definite.
+    forward_dynamics: sp.Matrix | None = None
+    pivots: list[sp.Expr] | None = None
+    derivation: str = "gibbs-appell"  # or "recursive" (symbolic/derivation.py)
 
     @property
     def n(self) -> int:
@@ -68,13 +74,17 @@ class Equations:
     def outputs(self) -> dict[str, list[sp.Expr]]:
         """Every output, flattened: the lower triangle of M row by row, then vectors."""
         n = self.n
-        return {
+        outputs = {
             "mass_matrix": [self.mass_matrix[r, s] for r in range(n) for s in range(r + 1)],
             "forcing": list(self.forcing),
             "inverse_dynamics": list(self.inverse_dynamics),
             "gravity": [-g for g in self.gravity_forces],
             "energy": [self.kinetic_energy, self.potential_energy],
         }
+        if self.forward_dynamics is not None:
+            outputs["forward_dynamics"] = list(self.forward_dynamics)
+            outputs["pivots"] = list(self.pivots)
+        return outputs
 
 
 def derive(model: Model) -> Equations:

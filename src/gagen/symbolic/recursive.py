@@ -72,6 +72,8 @@ def derive_recursive(model: Model) -> Equations:
     gravity = sp.Matrix(model.gravity)
     w = _angular_velocities(links, coords, rec)
     inverse = sp.Matrix(_rnea(links, coords, rec, w, coords.qdd, gravity))
+    # b - Qg in one pass (velocities and gravity, no qdd): the forcing is tau minus it
+    nonlinear = sp.Matrix(_rnea(links, coords, rec, w, None, gravity))
     b = sp.Matrix(_rnea(links, coords, rec, w, None, None))
     Qg = -sp.Matrix(_rnea(links, coords, rec, None, None, gravity))
     M = _crba(links, model.dof, rec)
@@ -86,10 +88,11 @@ def derive_recursive(model: Model) -> Equations:
         mass_matrix=M,
         velocity_terms=b,
         gravity_forces=Qg,
-        forcing=tau + Qg - b,
+        forcing=tau - nonlinear,
         inverse_dynamics=inverse,
         kinetic_energy=T,
         potential_energy=V,
+        derivation="recursive",
     )
     eqs.seconds = time.perf_counter() - start
     return eqs
