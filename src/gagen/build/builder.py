@@ -242,37 +242,36 @@ def _run_jobs(jobs: list[Job], folder: Path, workers: int = 2, progress=None) ->
     total = len(jobs) + sum(_chain_length(job) for job in jobs)
     done = 0
     running: list[tuple[Job, subprocess.Popen, object]] = []
-    try:
-        while pending or running:
-            while pending and len(running) < workers and not failures:
-                job = pending.pop(0)
-                log = tempfile.TemporaryFile(mode="w+", errors="replace")
-                running.append((job, subprocess.Popen(job.command, cwd=folder, stdout=log,
-                                                      stderr=subprocess.STDOUT), log))
-            if not running:
-                break
-            finished = [item for item in running if item[1].poll() is not None]
-            if not finished:
-                time.sleep(0.02)
-                continue
-            for item in finished:
-                running.remove(item)
-                job, proc, log = item
-                log.seek(0)
-                output = log.read()
-                log.close()
-                done += 1
-                if proc.returncode != 0:
-                    failures.append((job, output))
-                elif job.then is not None:
-                    pending.insert(0, job.then)
-                if progress is not None:
-                    progress(done, total)
-    finally:
-        for _, proc, log in running:  # interrupted: stop the tools still running
-            proc.kill()
-            proc.wait()
-            log.close()
+    with contextlib.ExitStack() as logs:  # each tool's output, read when it ends
+        try:
+            while pending or running:
+                while pending and len(running) < workers and not failures:
+                    job = pending.pop(0)
+                    log = logs.enter_context(tempfile.TemporaryFile(mode="w+",
+                                                                    errors="replace"))
+                    running.append((job, subprocess.Popen(job.command, cwd=folder, stdout=log,
+                                                          stderr=subprocess.STDOUT), log))
+                if not running:
+                    break
+                finished = [item for item in running if item[1].poll() is not None]
+                if not finished:
+                    time.sleep(0.02)
+                    continue
+                for item in finished:
+                    running.remove(item)
+                    job, proc, log = item
+                    log.seek(0)
+                    done += 1
+                    if proc.returncode != 0:
+                        failures.append((job, log.read()))
+                    elif job.then is not None:
+                        pending.insert(0, job.then)
+                    if progress is not None:
+                        progress(done, total)
+        finally:
+            for _, proc, _ in running:  # interrupted: stop the tools still running
+                proc.kill()
+                proc.wait()
     if failures:
         job = failures[0][0]
         shown = "\n".join(f"$ {' '.join(j.command[:1] + j.command[-6:])}\n{out.strip()}"
