@@ -26,7 +26,9 @@ one forward-mode pass over the velocity terms' program with the n rates as varia
 cheaper than C = 1/2 (Mdot + J - J^T) with Mdot = sum_k dM/dq_k qd_k and J = d(M qd)/dq
 (the same matrix, from M's program with n + 1 directions). Pinocchio's
 `computeCoriolisMatrix` gives this same C (tests/test_derivatives.py). For the same
-reason dtau_dqd = db/dqd = 2 C: the equations have no other rate-dependent term.
+reason dtau_dqd = db/dqd = 2 C: the equations have no other rate-dependent term. (Should
+rate-dependent joint terms such as viscous damping join the equations, they belong in
+dtau_dqd but not in C: C must then come from the rigid-body velocity terms alone.)
 
 How the API composes its results from these kernels (the lambdify backend does it in
 NumPy; the compiled backend is to do the same in C):
