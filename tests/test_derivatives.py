@@ -33,6 +33,7 @@ CASES = {
     "rrr": ("rrr", "gibbs-appell", True),
     "rrr-recursive": ("rrr", "recursive", True),
     **{f"random{s}": (f"random:{s}", "auto", True) for s in RANDOM_TREE_SEEDS},
+    "random7-recursive": ("random:7", "recursive", True),
     "ur5": (str(SHARED_URDF / "ur5_robot.urdf"), "auto", False),
     "panda": (str(SHARED_URDF / "panda.urdf"), "auto", False),
 }
