@@ -32,6 +32,19 @@ def test_info_lists_coordinates_and_parameters(capsys):
     assert "coordinates  3: q1, q2, q3" in out and "m3" in out and "40" in out
 
 
+def test_info_lists_every_method_of_the_api(capsys):
+    from gagen.runtime.dynamics import Dynamics
+
+    assert main(["info", "rrr"]) == 0
+    out = capsys.readouterr().out
+    listed = [line.split()[0].split("(")[0] for line in out.split("methods", 1)[1].splitlines()
+              if "(" in line.split()[0]]
+    documented = [name for name, f in vars(Dynamics).items()
+                  if callable(f) and not name.startswith("_") and name != "parameter_vector"]
+    assert sorted(listed) == sorted(documented)
+    assert "linearize(q, qd, tau) *" in out and "(6, 6), (6, 3)" in out
+
+
 def test_unknown_model_is_a_clean_error(capsys):
     assert main(["info", "no-such-robot.txt"]) == 2
     assert "not a built-in model" in capsys.readouterr().err

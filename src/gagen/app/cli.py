@@ -214,7 +214,7 @@ def build_command(args: argparse.Namespace) -> int:
 
 
 def info_command(args: argparse.Namespace) -> int:
-    """A model's coordinates and parameters."""
+    """A model's coordinates, parameters and the API of its dynamics object."""
     from ..model.resolve import resolve_model
 
     model = resolve_model(args.model)
@@ -226,7 +226,33 @@ def info_command(args: argparse.Namespace) -> int:
     print("parameters")
     for name, value in model.parameters.items():
         print(f"  {name:<24} {value:g}")
+    _print_methods(model.dof)
     return 0
+
+
+# (call, what it returns); {n} and {m} (= 2n) become the model's sizes. The starred ones
+# are in the lambdify backend only, until the compiled derivative kernels land.
+_METHODS = (
+    ("mass_matrix(q)", "M: ({n}, {n})"),
+    ("forcing(q, qd, tau)", "F with M qdd = F: ({n},)"),
+    ("forward_dynamics(q, qd, tau)", "qdd: ({n},)"),
+    ("inverse_dynamics(q, qd, qdd)", "tau: ({n},)"),
+    ("gravity(q)", "tau that holds q at rest: ({n},)"),
+    ("energy(q, qd)", "(kinetic, potential)"),
+    ("inverse_dynamics_derivatives(q, qd, qdd) *", "(dtau_dq, dtau_dqd): ({n}, {n}) each"),
+    ("forward_dynamics_derivatives(q, qd, tau) *",
+     "(dqdd_dq, dqdd_dqd, dqdd_dtau = M^-1): ({n}, {n}) each"),
+    ("coriolis_matrix(q, qd) *", "C with C qd = velocity terms: ({n}, {n})"),
+    ("linearize(q, qd, tau) *", "(A, B) of x' = f(x, tau), x = (q, qd): ({m}, {m}), ({m}, {n})"),
+)
+
+
+def _print_methods(n: int) -> None:
+    """The API of `gagen.load(model)` with this model's array shapes."""
+    print("methods      dyn = gagen.load(MODEL); stacked (N, ...) inputs give stacked outputs")
+    for call, returns in _METHODS:
+        print(f"  {call:<44} {returns.format(n=n, m=2 * n)}")
+    print('  * backend="lambdify" for now; the compiled backend gets them in the next step')
 
 
 def simulate_command(args: argparse.Namespace) -> int:
@@ -308,7 +334,7 @@ COMMANDS: dict[str, Command] = {
         "Derive the Gibbs-Appell equations, generate C with CSE and compile it through "
         "Cython. Shows each stage with its time and prints the operation counts before and "
         "after CSE."),
-    "info": Command(info_command, "show a model's coordinates and parameters", _info_arguments),
+    "info": Command(info_command, "show a model's coordinates, parameters and API", _info_arguments),
     "simulate": Command(simulate_command,
                         "direct dynamics under feedback: the paper's Fig. 2 and 3",
                         _simulate_arguments, SIMULATE_DESCRIPTION, preformatted=True),

@@ -26,3 +26,22 @@ class CompiledDynamics(Dynamics):
         self.kernels = module.CompiledModel(self.parameter_vector)
         for name in KERNEL_METHODS:
             setattr(self, name, getattr(self.kernels, name))
+
+    # The derivative kernels are generated in the next step (issue 15, phase 2); until
+    # then the compiled backend says so instead of computing them some slower way.
+
+    def inverse_dynamics_derivatives(self, q, qd, qdd, p=None):
+        raise NotImplementedError(_NO_DERIVATIVES_YET)
+
+    def forward_dynamics_derivatives(self, q, qd, tau, p=None):
+        raise NotImplementedError(_NO_DERIVATIVES_YET)
+
+    def coriolis_matrix(self, q, qd, p=None):
+        raise NotImplementedError(_NO_DERIVATIVES_YET)
+
+
+_NO_DERIVATIVES_YET = (
+    "the compiled backend does not have the derivatives yet (compiled derivative kernels "
+    "are coming in the next step); use gagen.load(model, backend=\"lambdify\") for "
+    "inverse_dynamics_derivatives, forward_dynamics_derivatives, coriolis_matrix and "
+    "linearize for now")

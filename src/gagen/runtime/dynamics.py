@@ -101,6 +101,41 @@ class Dynamics:
         """(kinetic, potential): floats, or arrays of shape (N,) for stacked states."""
         raise NotImplementedError
 
+    # --- derivatives (how they are derived and composed: gagen.symbolic.derivatives) -------
+
+    def inverse_dynamics_derivatives(self, q, qd, qdd, p=None) -> tuple:
+        """(∂τ/∂q, ∂τ/∂q̇) of τ = inverse_dynamics(q, q̇, q̈): each (n, n), or (N, n, n) for
+        stacked states; entry [i, j] is ∂τ_i/∂q_j. (∂τ/∂q̈ is `mass_matrix(q)`.)"""
+        raise NotImplementedError
+
+    def forward_dynamics_derivatives(self, q, qd, tau, p=None) -> tuple:
+        """(∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂τ) of q̈ = forward_dynamics(q, q̇, τ): each (n, n), or
+        (N, n, n) for stacked states. ∂q̈/∂τ is M(q)⁻¹, and ∂q̈/∂x = −M⁻¹ ∂τ/∂x at
+        q̈ = forward_dynamics(q, q̇, τ). Raises as `forward_dynamics` does."""
+        raise NotImplementedError
+
+    def coriolis_matrix(self, q, qd, p=None) -> np.ndarray:
+        """C(q, q̇) from the Christoffel symbols of the first kind of M: shape (n, n), or
+        (N, n, n) for stacked states. C q̇ is the velocity terms of the equations of motion
+        (`inverse_dynamics(q, q̇, 0) - gravity(q)`) and Ṁ − 2C is skew-symmetric."""
+        raise NotImplementedError
+
+    def linearize(self, q, qd, tau, p=None) -> tuple:
+        """(A, B) of ẋ = f(x, u) at x = (q, q̇), u = τ: A = ∂f/∂x of shape (2n, 2n),
+        B = ∂f/∂u of shape (2n, n), or (N, 2n, 2n) and (N, 2n, n) for stacked states.
+
+        A = [[0, I], [∂q̈/∂q, ∂q̈/∂q̇]] and B = [[0], [M⁻¹]], from
+        `forward_dynamics_derivatives`."""
+        dqdd_dq, dqdd_dqd, dqdd_dtau = self.forward_dynamics_derivatives(q, qd, tau, p)
+        n, lead = self.n, dqdd_dq.shape[:-2]
+        A = np.zeros(lead + (2 * n, 2 * n))
+        A[..., :n, n:] = np.eye(n)
+        A[..., n:, :n] = dqdd_dq
+        A[..., n:, n:] = dqdd_dqd
+        B = np.zeros(lead + (2 * n, n))
+        B[..., n:, :] = dqdd_dtau
+        return A, B
+
 
 # The name of earlier versions, kept for code that imported it.
 DynamicsInfo = Dynamics

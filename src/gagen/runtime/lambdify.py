@@ -2,26 +2,21 @@
 
 from __future__ import annotations
 
+import logging
+import time
+from functools import cached_property
+
 import numpy as np
 import sympy as sp
 
 from ..errors import NonFiniteStateError
 from ..manifest import ModelInfo
+from ..symbolic.derivatives import DerivativeEquations, derive_derivatives
+from ..symbolic.differentiate import needed_definitions
 from ..symbolic.gibbs_appell import Equations
 from .dynamics import Dynamics, SingularMassMatrixError, as_states
 
-
-def _needed_intermediates(eqs: Equations, exprs) -> list[tuple[sp.Symbol, sp.Expr]]:
-    """The intermediate definitions the expressions depend on, in definition order."""
-    defined = {s: (k, e) for k, (s, e) in enumerate(eqs.intermediates)}
-    needed: set[sp.Symbol] = set()
-    stack = [s for x in exprs for s in sp.sympify(x).free_symbols if s in defined]
-    while stack:
-        s = stack.pop()
-        if s not in needed:
-            needed.add(s)
-            stack.extend(t for t in defined[s][1].free_symbols if t in defined)
-    return [eqs.intermediates[k] for k in sorted(defined[s][0] for s in needed)]
+log = logging.getLogger(__name__)
 
 
 class LambdifyDynamics(Dynamics):
@@ -48,13 +43,17 @@ class LambdifyDynamics(Dynamics):
         n = self.n
         self._lower = np.tril_indices(n)
 
-    def _lambdify(self, args, exprs):
+    def _lambdify(self, args, exprs, definitions=None):
         """A NumPy function of the flattened args; lambdify sees none of the users' names.
 
-        Arguments become `a<k>` and intermediates `t<k>`: a parameter called `sin` or a
-        joint called like an intermediate cannot shadow anything in the generated code."""
+        `definitions` is the program the expressions are written in (default: the
+        equations' intermediates). Arguments become `a<k>` and intermediates `t<k>`: a
+        parameter called `sin` or a joint called like an intermediate cannot shadow
+        anything in the generated code."""
         flat_args = [s for group in args for s in group]
-        needed = _needed_intermediates(self.equations, exprs)
+        if definitions is None:
+            definitions = self.equations.intermediates
+        needed = needed_definitions(definitions, exprs)
         rename = {s: sp.Symbol(f"a{k}") for k, s in enumerate(flat_args)}
         rename.update({s: sp.Symbol(f"t{k}") for k, (s, _) in enumerate(needed)})
         definitions = [(rename[s], e.xreplace(rename)) for s, e in needed]
@@ -84,18 +83,8 @@ class LambdifyDynamics(Dynamics):
         return self._call(self._forcing, states, p, stacked)
 
     def forward_dynamics(self, q, qd, tau, p=None) -> np.ndarray:
-        M = self.mass_matrix(q, p)
-        F = self.forcing(q, qd, tau, p)
-        if not np.isfinite(M).all():  # LAPACK may pass NaN through instead of failing
-            raise NonFiniteStateError(
-                "the mass matrix is NaN or inf at this state: q holds NaN or inf")
-        try:
-            L = np.linalg.cholesky(M)
-        except np.linalg.LinAlgError:
-            raise SingularMassMatrixError(
-                "mass matrix is singular or not positive definite at this state") from None
-        y = np.linalg.solve(L, F[..., None])
-        return np.linalg.solve(np.swapaxes(L, -1, -2), y)[..., 0]
+        L = _cholesky(self.mass_matrix(q, p))
+        return _cholesky_solve(L, self.forcing(q, qd, tau, p)[..., None])[..., 0]
 
     def inverse_dynamics(self, q, qd, qdd, p=None) -> np.ndarray:
         states, stacked = as_states(self.n, q, qd, qdd, names=("q", "qd", "qdd"))
@@ -112,3 +101,61 @@ class LambdifyDynamics(Dynamics):
         if stacked:
             return values[:, 0].copy(), values[:, 1].copy()
         return float(values[0]), float(values[1])
+
+    # --- derivatives (gagen.symbolic.derivatives: its docstring says how they compose) ----
+
+    @cached_property
+    def derivative_equations(self) -> DerivativeEquations:
+        """The derivative kernels' program, derived on first use (not at load)."""
+        start = time.perf_counter()
+        derivatives = derive_derivatives(self.equations)
+        log.info("%s: derivatives derived in %.2f s", self.info.name,
+                 time.perf_counter() - start)
+        return derivatives
+
+    @cached_property
+    def _derivative_functions(self) -> dict:
+        d = self.derivative_equations
+        args = d.arguments()
+        return {name: self._lambdify(args[name], exprs, d.intermediates)
+                for name, exprs in d.outputs().items()}
+
+    def inverse_dynamics_derivatives(self, q, qd, qdd, p=None) -> tuple:
+        states, stacked = as_states(self.n, q, qd, qdd, names=("q", "qd", "qdd"))
+        fn = self._derivative_functions["inverse_dynamics_derivatives"]
+        values = self._call(fn, states, p, stacked)
+        both = values.reshape(values.shape[:-1] + (2, self.n, self.n))
+        return both[..., 0, :, :].copy(), both[..., 1, :, :].copy()
+
+    def coriolis_matrix(self, q, qd, p=None) -> np.ndarray:
+        states, stacked = as_states(self.n, q, qd, names=("q", "qd"))
+        values = self._call(self._derivative_functions["coriolis_matrix"], states, p, stacked)
+        return values.reshape(values.shape[:-1] + (self.n, self.n))
+
+    def forward_dynamics_derivatives(self, q, qd, tau, p=None) -> tuple:
+        (q, qd, tau), _ = as_states(self.n, q, qd, tau, names=("q", "qd", "tau"))
+        p = self.parameter_vector(p)
+        L = _cholesky(self.mass_matrix(q, p))
+        qdd = _cholesky_solve(L, self.forcing(q, qd, tau, p)[..., None])[..., 0]
+        dtau_dq, dtau_dqd = self.inverse_dynamics_derivatives(q, qd, qdd, p)
+        M_inv = _cholesky_solve(L, np.broadcast_to(np.eye(self.n), L.shape))
+        M_inv = 0.5 * (M_inv + np.swapaxes(M_inv, -1, -2))  # symmetric, as M^-1 is
+        return -_cholesky_solve(L, dtau_dq), -_cholesky_solve(L, dtau_dqd), M_inv
+
+
+def _cholesky(M: np.ndarray) -> np.ndarray:
+    """The lower Cholesky factor of M (or of each stacked M), with the runtime's errors."""
+    if not np.isfinite(M).all():  # LAPACK may pass NaN through instead of failing
+        raise NonFiniteStateError(
+            "the mass matrix is NaN or inf at this state: q holds NaN or inf")
+    try:
+        return np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        raise SingularMassMatrixError(
+            "mass matrix is singular or not positive definite at this state") from None
+
+
+def _cholesky_solve(L: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """X with L L^T X = rhs (rhs (..., n, k)): two triangular solves."""
+    y = np.linalg.solve(L, rhs)
+    return np.linalg.solve(np.swapaxes(L, -1, -2), y)

@@ -1,0 +1,124 @@
+"""Derivatives of the equations of motion: what MPC and trajectory optimisation need.
+
+`derive_derivatives(eqs)` differentiates the straight-line program of an `Equations`
+(either derivation: Gibbs-Appell or recursive RNEA/CRBA) by forward mode through its named
+intermediates (`differentiate.differentiate`: the chain rule per definition, each sum
+named; nothing is expanded, nothing is a finite difference). It returns one program,
+`DerivativeEquations.intermediates` = `eqs.intermediates` followed by the derivative's
+own definitions (numbered after them, never defining a name twice, reusing every
+expression `eqs` already named), and two kernels' outputs, flat lists of expressions in
+that program:
+
+kernel `inverse_dynamics_derivatives`, arguments (q, qd, qdd, p), 2 n^2 values:
+    `dtau_dq`  row-major n x n, entry i*n + j = d tau_i / d q_j   of tau = ID(q, qd, qdd)
+    `dtau_dqd` row-major n x n, entry i*n + j = d tau_i / d qd_j  (free of qdd)
+    (d tau / d qdd is M(q), the existing `mass_matrix` output.)
+kernel `coriolis_matrix`, arguments (q, qd, p), n^2 values:
+    `coriolis` row-major n x n, entry i*n + j = C_ij, the Christoffel-symbol matrix.
+
+The Coriolis matrix. With M's Christoffel symbols of the first kind
+    Gamma_ijk = 1/2 (dM_ij/dq_k + dM_ik/dq_j - dM_jk/dq_i),
+C_ij = sum_k Gamma_ijk qd_k. Then C qd = b, the velocity terms (b_i = sum_jk Gamma_ijk
+qd_j qd_k, Lagrange's equations), and Mdot - 2C is skew-symmetric. Since Gamma_ijk is
+symmetric in j and k, and b is quadratic in qd,
+    d b_i / d qd_j = sum_k (Gamma_ijk + Gamma_ikj) qd_k = 2 C_ij,     so  C = 1/2 db/dqd:
+one forward-mode pass over the velocity terms' program with the n rates as variables,
+cheaper than C = 1/2 (Mdot + J - J^T) with Mdot = sum_k dM/dq_k qd_k and J = d(M qd)/dq
+(the same matrix, from M's program with n + 1 directions). Pinocchio's
+`computeCoriolisMatrix` gives this same C (tests/test_derivatives.py). For the same
+reason dtau_dqd = db/dqd = 2 C: the equations have no other rate-dependent term. (Should
+rate-dependent joint terms such as viscous damping join the equations, they belong in
+dtau_dqd but not in C: C must then come from the rigid-body velocity terms alone.)
+
+How the API composes its results from these kernels (the lambdify backend does it in
+NumPy; the compiled backend is to do the same in C):
+
+- `inverse_dynamics_derivatives(q, qd, qdd)` -> (dtau_dq, dtau_dqd): the kernel.
+- `coriolis_matrix(q, qd)` -> C: the kernel.
+- `forward_dynamics_derivatives(q, qd, tau)` -> (dqdd_dq, dqdd_dqd, dqdd_dtau):
+    1. qdd = FD(q, qd, tau) = M^-1 forcing, keeping the factors of M (L D L^T in C,
+       Cholesky in NumPy);
+    2. (dtau_dq, dtau_dqd) = the `inverse_dynamics_derivatives` kernel at (q, qd, qdd);
+    3. dqdd_dq = -M^-1 dtau_dq, dqdd_dqd = -M^-1 dtau_dqd (n right-hand sides each, by
+       the triangular solves with the factors of step 1), dqdd_dtau = M^-1 (the solves on
+       the identity).
+  Why: ID(q, qd, FD(q, qd, tau)) = tau identically; differentiating it, with
+  d ID / d qdd = M, gives d ID/dx + M dFD/dx = 0 for x = q, qd, and M dFD/dtau = I.
+- `linearize(q, qd, tau)` -> (A, B) of xdot = f(x, u), x = (q, qd), u = tau:
+    A = [[0, I], [dqdd_dq, dqdd_dqd]]  (2n x 2n),   B = [[0], [dqdd_dtau]]  (2n x n).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import sympy as sp
+
+from .differentiate import differentiate, needed_definitions, recorder_after
+from .gibbs_appell import Equations
+
+
+@dataclass
+class DerivativeEquations:
+    """The derivative kernels of a model as one straight-line program (module docstring).
+
+    `intermediates` starts with all of `equations.intermediates`; every output is an
+    expression in the intermediates, the coordinate symbols and the parameters. The zero
+    entries of a Jacobian (a chain's joint k never depends on the joints after it, ...) are
+    exact zeros.
+    """
+
+    equations: Equations
+    intermediates: list[tuple[sp.Symbol, sp.Expr]]
+    dtau_dq: list[sp.Expr]      # row-major n x n, in q, qd, qdd, p
+    dtau_dqd: list[sp.Expr]     # row-major n x n, in q, qd, p
+    coriolis: list[sp.Expr]     # row-major n x n, in q, qd, p
+    seconds: float = 0.0
+
+    @property
+    def n(self) -> int:
+        return self.equations.n
+
+    def outputs(self) -> dict[str, list[sp.Expr]]:
+        """Each kernel's outputs, flat: `inverse_dynamics_derivatives` is dtau_dq then
+        dtau_dqd (2 n^2 values), `coriolis_matrix` is C (n^2 values), all row-major."""
+        return {
+            "inverse_dynamics_derivatives": [*self.dtau_dq, *self.dtau_dqd],
+            "coriolis_matrix": list(self.coriolis),
+        }
+
+    def arguments(self) -> dict[str, list[list[sp.Symbol]]]:
+        """Each kernel's arguments, as groups of symbols in call order."""
+        c, p = self.equations.coords, self.equations.parameters
+        return {
+            "inverse_dynamics_derivatives": [c.q, c.qd, c.qdd, p],
+            "coriolis_matrix": [c.q, c.qd, p],
+        }
+
+    def operation_count(self, kernel: str | None = None) -> int:
+        """`sympy.count_ops` over the definitions a kernel needs (default: all kernels
+        together) and its outputs, each definition counted once."""
+        outputs = self.outputs()
+        exprs = [e for name, out in outputs.items() if kernel in (None, name) for e in out]
+        needed = needed_definitions(self.intermediates, exprs)
+        return sum(sp.count_ops(e) for _, e in needed) + sum(sp.count_ops(e) for e in exprs)
+
+
+def derive_derivatives(eqs: Equations) -> DerivativeEquations:
+    """The derivative kernels of `eqs` as a continuation of its program (module docstring)."""
+    start = time.perf_counter()
+    n, c = eqs.n, eqs.coords
+    rec = recorder_after(eqs.intermediates)
+    jacobian = differentiate(eqs.intermediates, list(eqs.inverse_dynamics), c.q + c.qd, rec)
+    db_dqd = differentiate(eqs.intermediates, list(eqs.velocity_terms), c.qd, rec)
+    half = sp.Rational(1, 2)
+    derivatives = DerivativeEquations(
+        equations=eqs,
+        intermediates=rec.definitions,
+        dtau_dq=[row[j] for row in jacobian for j in range(n)],
+        dtau_dqd=[row[n + j] for row in jacobian for j in range(n)],
+        coriolis=[half * e for row in db_dqd for e in row],
+    )
+    derivatives.seconds = time.perf_counter() - start
+    return derivatives

@@ -1,0 +1,302 @@
+"""The derivatives of the dynamics (gagen.symbolic.derivatives, the lambdify backend):
+against Pinocchio's analytical derivatives and Coriolis matrix, against central differences
+of gagen's own functions, the Coriolis matrix's defining properties, and the API's shapes,
+checks and fresh memory."""
+
+from __future__ import annotations
+
+import functools
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import sympy as sp
+from conftest import SHARED_URDF
+from random_trees import random_model
+
+import gagen
+from gagen import NonFiniteStateError, SingularMassMatrixError
+from gagen.model.resolve import resolve_model
+from gagen.runtime.lambdify import LambdifyDynamics
+from gagen.symbolic.derivation import derive_equations
+from gagen.symbolic.derivatives import derive_derivatives
+from gagen.symbolic.symbols import Acceleration, Torque
+
+RTOL = 1e-9
+RANDOM_TREE_SEEDS = (1, 4, 7, 12)
+
+# (model, derivation, vary the parameters): a URDF's full inertia tensors do not stay
+# positive definite under independent random scalings of their entries, so those run at
+# their defaults
+CASES = {
+    "rrr": ("rrr", "gibbs-appell", True),
+    "rrr-recursive": ("rrr", "recursive", True),
+    **{f"random{s}": (f"random:{s}", "auto", True) for s in RANDOM_TREE_SEEDS},
+    "random7-recursive": ("random:7", "recursive", True),
+    "ur5": (str(SHARED_URDF / "ur5_robot.urdf"), "auto", False),
+    "panda": (str(SHARED_URDF / "panda.urdf"), "auto", False),
+}
+
+
+def _model(name: str):
+    if name.startswith("random:"):
+        return random_model(np.random.default_rng(int(name.split(":")[1])), 6, symbolic=True)
+    return resolve_model(name)
+
+
+@functools.cache
+def lambdify_dynamics(case: str) -> LambdifyDynamics:
+    name, derivation, _ = CASES[case]
+    return LambdifyDynamics(derive_equations(_model(name), derivation))
+
+
+def random_state(dyn, rng, vary: bool = True):
+    """q, qd, qdd, tau and a parameter array (defaults scaled by 0.5..1.5 when `vary`)."""
+    q = rng.uniform(-np.pi, np.pi, dyn.n)
+    qd, qdd, tau = rng.normal(size=(3, dyn.n)) * 2.0
+    p = dyn.parameter_vector()
+    if vary:
+        p = p * rng.uniform(0.5, 1.5, p.shape)
+    return q, qd, qdd, tau, p
+
+
+def assert_close(got, want, rtol=RTOL):
+    """Entrywise within rtol of the matrix's largest entry (zeros of one are tiny in the
+    other, so a purely entrywise relative test would compare rounding errors)."""
+    want = np.asarray(want)
+    np.testing.assert_allclose(got, want, rtol=rtol, atol=rtol * max(1.0, np.abs(want).max()))
+
+
+# --- against Pinocchio ------------------------------------------------------------------
+
+def matrix_from_pinocchio(pm, X) -> np.ndarray:
+    """A matrix over Pinocchio's velocity order in gagen's coordinate order: the
+    permutation applies to the rows and the columns."""
+    X = np.asarray(X)
+    out = np.empty_like(X)
+    out[np.ix_(pm.gagen_order, pm.gagen_order)] = X
+    return out
+
+
+def test_the_random_trees_have_every_joint_type():
+    types = {b.joint.type for s in RANDOM_TREE_SEEDS for b in _model(f"random:{s}").bodies}
+    assert types == {"revolute", "continuous", "prismatic", "fixed"}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_matches_pinocchio(case):
+    pin = pytest.importorskip("pinocchio")
+    from gagen.reference.pinocchio import pinocchio_model, to_pinocchio
+
+    dyn = lambdify_dynamics(case)
+    rng = np.random.default_rng(11)
+    for _ in range(3):
+        q, qd, qdd, tau, p = random_state(dyn, rng, vary=CASES[case][2])
+        pm = pinocchio_model(dyn.model, p)
+        gagen_order = functools.partial(matrix_from_pinocchio, pm)
+        qp, vp, ap, tp = to_pinocchio(pm, q, qd, qdd, tau)
+        # Pinocchio returns views into its Data: copy them while each Data is alive
+        data = pm.createData()
+        rnea = [np.array(a) for a in pin.computeRNEADerivatives(pm, data, qp, vp, ap)]
+        aba = [np.array(a) for a in pin.computeABADerivatives(pm, data, qp, vp, tp)]
+        coriolis = np.array(pin.computeCoriolisMatrix(pm, data, qp, vp))
+
+        dtau_dq, dtau_dqd = dyn.inverse_dynamics_derivatives(q, qd, qdd, p)
+        assert_close(dtau_dq, gagen_order(rnea[0]))
+        assert_close(dtau_dqd, gagen_order(rnea[1]))
+        dqdd_dq, dqdd_dqd, dqdd_dtau = dyn.forward_dynamics_derivatives(q, qd, tau, p)
+        assert_close(dqdd_dq, gagen_order(aba[0]))
+        assert_close(dqdd_dqd, gagen_order(aba[1]))
+        assert_close(dqdd_dtau, gagen_order(aba[2]))
+        assert_close(dyn.coriolis_matrix(q, qd, p), gagen_order(coriolis))
+
+
+# --- against central differences of gagen's own functions -------------------------------
+
+def central_difference(f, x, h=1e-6):
+    """d f / d x (f: vector -> array of shape s) as an array of shape s + (len(x),)."""
+    columns = []
+    for j in range(x.size):
+        e = np.zeros_like(x)
+        e[j] = h
+        columns.append((f(x + e) - f(x - e)) / (2 * h))
+    return np.stack(columns, axis=-1)
+
+
+@pytest.mark.parametrize("case", ["rrr", "rrr-recursive", "random4", "random7"])
+def test_matches_central_differences(case):
+    dyn = lambdify_dynamics(case)
+    rng = np.random.default_rng(5)
+    n = dyn.n
+    q, qd, qdd, tau, p = random_state(dyn, rng)
+    rtol = 1e-6
+
+    dtau_dq, dtau_dqd = dyn.inverse_dynamics_derivatives(q, qd, qdd, p)
+    assert_close(dtau_dq, central_difference(lambda x: dyn.inverse_dynamics(x, qd, qdd, p), q),
+                 rtol)
+    assert_close(dtau_dqd, central_difference(lambda x: dyn.inverse_dynamics(q, x, qdd, p), qd),
+                 rtol)
+
+    derivatives = dyn.forward_dynamics_derivatives(q, qd, tau, p)
+    for k, got in enumerate(derivatives):
+        def fd(x, k=k):
+            args = [q, qd, tau]
+            args[k] = x
+            return dyn.forward_dynamics(*args, p)
+        assert_close(got, central_difference(fd, [q, qd, tau][k]), rtol)
+
+    A, B = dyn.linearize(q, qd, tau, p)
+    x = np.concatenate([q, qd])
+
+    def f(x, u):
+        return np.concatenate([x[n:], dyn.forward_dynamics(x[:n], x[n:], u, p)])
+    assert_close(A, central_difference(lambda x: f(x, tau), x), rtol)
+    assert_close(B, central_difference(lambda u: f(x, u), tau), rtol)
+
+
+# --- the Coriolis matrix -------------------------------------------------------------
+
+@pytest.mark.parametrize("case", ["rrr", "rrr-recursive", "random1", "random12", "panda"])
+def test_coriolis_matrix_properties(case):
+    """C qd = the velocity terms; Mdot - 2C is skew-symmetric, with Mdot from central
+    differences along qd; and dtau/dqd = 2C (the symmetry of the Christoffel symbols)."""
+    dyn = lambdify_dynamics(case)
+    rng = np.random.default_rng(8)
+    for _ in range(2):
+        q, qd, qdd, _, p = random_state(dyn, rng, vary=CASES[case][2])
+        C = dyn.coriolis_matrix(q, qd, p)
+        b = dyn.inverse_dynamics(q, qd, np.zeros(dyn.n), p) - dyn.gravity(q, p)
+        assert_close(C @ qd, b)
+        h = 1e-6
+        Mdot = (dyn.mass_matrix(q + h * qd, p) - dyn.mass_matrix(q - h * qd, p)) / (2 * h)
+        S = Mdot - 2 * C
+        assert np.abs(S).max() > 1e-3 * np.abs(C).max()  # C is not simply Mdot / 2
+        np.testing.assert_allclose(S + S.T, 0, atol=1e-6 * max(1.0, np.abs(Mdot).max()))
+        assert_close(dyn.inverse_dynamics_derivatives(q, qd, qdd, p)[1], 2 * C)
+
+
+# --- the program --------------------------------------------------------------------
+
+def _needed_symbols(program, exprs):
+    from gagen.symbolic.differentiate import needed_definitions
+
+    needed = needed_definitions(program.intermediates, exprs)
+    return set().union(*(e.free_symbols for _, e in needed),
+                       *(sp.sympify(e).free_symbols for e in exprs))
+
+
+@pytest.mark.parametrize("name, derivation", [("rrr", "gibbs-appell"), ("chain:4", "recursive")])
+def test_program_continues_the_equations_and_its_kernels_use_their_arguments(name, derivation):
+    eqs = derive_equations(resolve_model(name), derivation)
+    d = derive_derivatives(eqs)
+    n = eqs.n
+    assert d.intermediates[:len(eqs.intermediates)] == eqs.intermediates
+    names = [s for s, _ in d.intermediates]
+    assert len(names) == len(set(names))
+    outputs = d.outputs()
+    assert len(outputs["inverse_dynamics_derivatives"]) == 2 * n * n
+    assert len(outputs["coriolis_matrix"]) == n * n
+    for kernel, exprs in outputs.items():
+        allowed = {s for group in d.arguments()[kernel] for s in group}
+        used = {s for s in _needed_symbols(d, exprs) if not s.name.startswith("_g")}
+        assert used <= allowed, (kernel, used - allowed)
+    # dtau/dqd and C are free of the accelerations, and nothing uses the torques
+    for exprs in (d.dtau_dqd, d.coriolis):
+        assert not any(isinstance(s, (Acceleration, Torque)) for s in _needed_symbols(d, exprs))
+    assert d.operation_count() >= d.operation_count("coriolis_matrix") > 0
+
+
+def test_structural_zeros_are_exact():
+    """chain:N's first joint turns about the vertical: nothing depends on its angle."""
+    d = derive_derivatives(derive_equations(resolve_model("chain:4"), "recursive"))
+    n = 4
+    assert all(d.dtau_dq[i * n] == 0 for i in range(n))
+    assert any(e != 0 for e in d.dtau_dq)
+
+
+def test_program_is_deterministic_across_hash_seeds():
+    code = ("from gagen.model.resolve import resolve_model\n"
+            "from gagen.symbolic.derivation import derive_equations\n"
+            "from gagen.symbolic.derivatives import derive_derivatives\n"
+            "d = derive_derivatives(derive_equations(resolve_model('chain:3'), 'recursive'))\n"
+            "print([(str(s), str(e)) for s, e in d.intermediates], d.outputs())\n")
+    outs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                           check=True, env={"PYTHONHASHSEED": seed, "PATH": ""}).stdout
+            for seed in ("1", "2")}
+    assert len(outs) == 1
+
+
+# --- the API ------------------------------------------------------------------------
+
+def _all_methods(dyn, q, qd, x, p=None):
+    """Every derivative method's outputs at one (possibly stacked) state, as a flat list."""
+    return [*dyn.inverse_dynamics_derivatives(q, qd, x, p),
+            *dyn.forward_dynamics_derivatives(q, qd, x, p),
+            dyn.coriolis_matrix(q, qd, p), *dyn.linearize(q, qd, x, p)]
+
+
+def test_shapes_and_stacked_inputs_match_single_calls():
+    dyn = lambdify_dynamics("rrr")
+    n = dyn.n
+    rng = np.random.default_rng(2)
+    Q, QD, X = rng.normal(size=(3, 5, n))
+    stacked = _all_methods(dyn, Q, QD, X)
+    assert [a.shape for a in stacked] == [(5, n, n)] * 6 + [(5, 2 * n, 2 * n), (5, 2 * n, n)]
+    for k in range(5):
+        single = _all_methods(dyn, Q[k], QD[k], X[k])
+        assert [a.shape for a in single] == [(n, n)] * 6 + [(2 * n, 2 * n), (2 * n, n)]
+        for s, one in zip(stacked, single):
+            np.testing.assert_allclose(s[k], one, rtol=1e-13, atol=1e-13)
+    # a single state broadcasts against stacked ones
+    mixed = _all_methods(dyn, Q[0], QD, X)
+    for s, m in zip(_all_methods(dyn, np.broadcast_to(Q[0], Q.shape), QD, X), mixed):
+        np.testing.assert_array_equal(s, m)
+
+
+def test_every_call_returns_fresh_memory():
+    dyn = lambdify_dynamics("rrr")
+    q, qd, x = np.full((3, 3), 0.3)
+    first = _all_methods(dyn, q, qd, x)
+    second = _all_methods(dyn, q, qd, x)
+    for a, b in zip(first, second):
+        assert not np.shares_memory(a, b)
+        a[...] = np.nan
+        assert np.isfinite(b).all()
+    assert not np.shares_memory(*dyn.inverse_dynamics_derivatives(q, qd, x))
+
+
+def test_parameters_and_bad_inputs():
+    dyn = lambdify_dynamics("rrr")
+    q, qd, x = np.full((3, 3), 0.3)
+    heavy = dyn.coriolis_matrix(q, qd, p={"m3": 80.0})
+    assert not np.allclose(heavy, dyn.coriolis_matrix(q, qd))
+    np.testing.assert_array_equal(heavy, dyn.coriolis_matrix(
+        q, qd, p=dyn.parameter_vector({"m3": 80.0})))
+    for method in (dyn.inverse_dynamics_derivatives, dyn.forward_dynamics_derivatives,
+                   dyn.linearize):
+        with pytest.raises(ValueError, match="shape"):
+            method(np.zeros(4), qd, x)
+        with pytest.raises(ValueError, match="rows"):
+            method(np.zeros((2, 3)), np.zeros((3, 3)), x)
+        with pytest.raises(TypeError):
+            method("q", qd, x)
+        with pytest.raises(KeyError, match="unknown parameter"):
+            method(q, qd, x, p={"mass_of_the_moon": 1.0})
+    with pytest.raises(ValueError, match="shape"):
+        dyn.coriolis_matrix(q, np.zeros(2))
+    massless = {name: 0.0 for name in dyn.parameters if name[0] in "mI"}
+    with pytest.raises(SingularMassMatrixError):
+        dyn.forward_dynamics_derivatives(q, qd, x, p=massless)
+    with pytest.raises(NonFiniteStateError):
+        dyn.linearize([0.1, np.nan, 0.3], qd, x)
+
+
+def test_compiled_backend_says_the_derivatives_are_coming():
+    dyn = gagen.load("rrr")  # the shipped module: no build
+    q = np.zeros(3)
+    for call in (lambda: dyn.inverse_dynamics_derivatives(q, q, q),
+                 lambda: dyn.forward_dynamics_derivatives(q, q, q),
+                 lambda: dyn.coriolis_matrix(q, q), lambda: dyn.linearize(q, q, q)):
+        with pytest.raises(NotImplementedError, match='backend="lambdify"'):
+            call()
