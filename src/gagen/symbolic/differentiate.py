@@ -66,6 +66,10 @@ def recorder_after(definitions: list[tuple[sp.Symbol, sp.Expr]], prefix: str = "
     rec = Recorder(prefix)
     rec.definitions = list(definitions)
     rec._by_expr = {expr: symbol for symbol, expr in definitions}
+    # numbered after every name of the program, also when some definitions were dropped
+    numbers = [int(s.name[len(prefix):]) for s, _ in definitions
+               if s.name.startswith(prefix) and s.name[len(prefix):].isdigit()]
+    rec.next_index = max(numbers, default=-1) + 1
     return rec
 
 

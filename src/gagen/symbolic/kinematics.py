@@ -31,6 +31,7 @@ class Recorder:
         self.prefix = prefix
         self.definitions: list[tuple[Internal, sp.Expr]] = []
         self._by_expr: dict[sp.Expr, Internal] = {}
+        self.next_index = 0  # the number of the next name (names are never reused)
 
     def name(self, expr) -> sp.Expr:
         expr = sp.sympify(expr)
@@ -38,7 +39,8 @@ class Recorder:
             return expr
         symbol = self._by_expr.get(expr)
         if symbol is None:
-            symbol = Internal(f"{self.prefix}{len(self.definitions)}")
+            symbol = Internal(f"{self.prefix}{self.next_index}")
+            self.next_index += 1
             self.definitions.append((symbol, expr))
             self._by_expr[expr] = symbol
         return symbol
