@@ -25,12 +25,14 @@ loss and armature are returned by `joint_terms`.
 
 from __future__ import annotations
 
+import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 import sympy as sp
 
-from ..errors import ModelError
+from ..errors import ModelError, one_line
 from .inputs import MAX_BODIES, name_field, quote
 from .merge import merge_fixed_joints, symmetric
 from .mjcf_files import scan_mjcf
@@ -67,17 +69,36 @@ def compile_mjcf(path: str | Path):
     source = str(path)
     scan_mjcf(path)
     mujoco = _import_mujoco(source)
+    notes: list[str] = []
     try:
-        mj = mujoco.MjModel.from_xml_path(source)
+        with _warnings_collected(mujoco, notes):
+            mj = mujoco.MjModel.from_xml_path(source)
     except (ValueError, RuntimeError, mujoco.FatalError) as exc:
-        message = str(exc).strip()
-        if len(message) > _MESSAGE_LENGTH:
-            message = message[:_MESSAGE_LENGTH] + "..."
-        raise ModelError(source, "MuJoCo's compiler", message) from None
+        raise ModelError(source, "MuJoCo's compiler", _shortened(str(exc))) from None
+    for note in notes:
+        warnings.warn(one_line(f"{source}: MuJoCo's compiler: {_shortened(note)}"),
+                      stacklevel=2)
     if mj.nbody - 1 > MAX_BODIES:
         raise ModelError(source, "<worldbody>", f"{mj.nbody - 1} bodies; gagen builds robots "
                          f"of at most {MAX_BODIES} bodies")
     return mj
+
+
+@contextmanager
+def _warnings_collected(mujoco, into: list[str]):
+    """MuJoCo's own warnings into a list: by default MuJoCo appends them to a file
+    MUJOCO_LOG.TXT in the current folder, and gagen writes nothing there."""
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(into.append)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
+def _shortened(message: str) -> str:
+    message = message.strip()
+    return message if len(message) <= _MESSAGE_LENGTH else message[:_MESSAGE_LENGTH] + "..."
 
 
 def _import_mujoco(source: str):
