@@ -215,20 +215,18 @@ def test_disabled_gravity_is_zero(tmp_path):
     assert load_mjcf(write(tmp_path, "m.xml", text)).parameters["g"] == 0.0
 
 
-def test_free_joint_is_refused_naming_the_body(tmp_path):
-    text = mjcf(inner='<body name="drone"><freejoint/>'
-                '<inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/></body>')
-    with pytest.raises(ModelError, match=r"body 'drone': has a free joint: floating bases "
-                       r"are not supported yet"):
-        load_mjcf(write(tmp_path, "m.xml", text))
+MASS = '<inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/>'
+FREE_BODY = f'<body name="drone"><freejoint/>{MASS}</body>'
+BALL_BODY = f'<body pos="0 0 0.1"><joint name="shoulder" type="ball"/>{MASS}</body>'
 
 
-def test_ball_joint_is_refused_with_advice(tmp_path):
-    text = mjcf(body_inner='<body pos="0 0 0.1"><joint name="shoulder" type="ball"/>'
-                '<inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/></body>')
-    with pytest.raises(ModelError, match=r"joint 'shoulder': ball joints are not supported; "
-                       r"model it as three hinge joints"):
-        load_mjcf(write(tmp_path, "m.xml", text))
+@pytest.mark.parametrize("inner, body_inner, reason", [
+    (FREE_BODY, "", r"body 'drone': has a free joint: floating bases are not supported yet"),
+    ("", BALL_BODY, r"joint 'shoulder': ball joints are not supported; model it as three"),
+], ids=["free", "ball"])
+def test_free_and_ball_joints_are_refused_naming_them(tmp_path, inner, body_inner, reason):
+    with pytest.raises(ModelError, match=reason):
+        load_mjcf(write(tmp_path, "m.xml", mjcf(inner=inner, body_inner=body_inner)))
 
 
 def test_nothing_moves_is_refused(tmp_path):
