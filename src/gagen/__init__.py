@@ -9,7 +9,13 @@ from __future__ import annotations
 
 import importlib
 
-from .errors import BuildError, ModelError, NonFiniteStateError, SingularMassMatrixError
+from .errors import (
+    BuildError,
+    InertiaWarning,
+    ModelError,
+    NonFiniteStateError,
+    SingularMassMatrixError,
+)
 from .loading import load
 from .sim.controllers import PD, ComputedTorque, paper_controller
 from .sim.simulate import SimulationResult, inverse_dynamics_along, simulate
@@ -30,6 +36,7 @@ __all__ = [
     "ComputedTorque",
     "Eq11Trajectory",
     "Equations",
+    "InertiaWarning",
     "Model",
     "ModelError",
     "NonFiniteStateError",

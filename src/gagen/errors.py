@@ -3,6 +3,7 @@
 - `ModelError`: a description that cannot be used; names the file, the element, the reason.
 - `BuildError` (and `CompilerNotFoundError`): generated code that did not compile.
 - `SingularMassMatrixError`: M(q) is singular or not positive definite at a state.
+- `InertiaWarning`: an inertia slightly off physical (CAD round-off), accepted unless strict.
 """
 
 from __future__ import annotations
@@ -41,3 +42,9 @@ class CompilerNotFoundError(BuildError):
 
 class SingularMassMatrixError(np.linalg.LinAlgError):
     """The mass matrix is singular or not positive definite at the given state."""
+
+
+class InertiaWarning(UserWarning):
+    """An inertia tensor that breaks positive-definiteness or the triangle inequality by a
+    small margin (CAD round-off) was accepted; `strict=True` refuses it instead. Filter it
+    with `warnings.filterwarnings("ignore", category=gagen.InertiaWarning)`."""

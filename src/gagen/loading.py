@@ -1,4 +1,5 @@
-"""gagen.load: what the user names (built-in, model file, URDF, Model) into dynamics objects.
+"""gagen.load: what the user names (built-in, model file, URDF, MJCF, Model) into dynamics
+objects.
 
 A model loaded before is found by a key of its input bytes in the cache's index, and
 loads without SymPy; anything else is read, derived and built (gagen.build.builder).
@@ -13,11 +14,13 @@ BACKENDS = ("compiled", "lambdify")
 _COMPILED_OPTIONS = ("cache_dir", "fast_math", "verbose", "portable", "derivation")
 
 
-def load(model="rrr", backend: str = "compiled", **options):
+def load(model="rrr", backend: str = "compiled", strict: bool = False, **options):
     """Load the equations of motion of a model, with one API for every backend.
 
     `model` is a built-in name (`rrr`, `chain:N`), a model file (.yaml, .yml, .json), a
-    .urdf file, or a `gagen.model.Model`. `backend` is "compiled" (generated C through
+    .urdf file, an MJCF file (.xml, .mjcf; needs `pip install gagen[mjcf]`), or a
+    `gagen.model.Model`. An inertia slightly off physical (CAD round-off) loads with a
+    `gagen.InertiaWarning`; `strict=True` refuses it. `backend` is "compiled" (generated C through
     Cython, built on first use and cached) or "lambdify" (SymPy's lambdify, no compiler).
     Options of the compiled backend: `cache_dir`, `fast_math`, `verbose` (show the build's
     progress), `portable` (one version of the kernels for any CPU, no FMA clone). Both
@@ -35,29 +38,31 @@ def load(model="rrr", backend: str = "compiled", **options):
         if options:
             raise TypeError(f"the lambdify backend takes only the option derivation, got "
                             f"{', '.join(options)}")
-        return _load_lambdify(model, derivation)
+        return _load_lambdify(model, derivation, strict)
     unknown = [key for key in options if key not in _COMPILED_OPTIONS]
     if unknown:
         raise TypeError(f"unknown option(s) {', '.join(unknown)} of the compiled backend "
                         f"(options: {', '.join(_COMPILED_OPTIONS)})")
-    return _load_compiled(model, **options)
+    return _load_compiled(model, strict=strict, **options)
 
 
-def _load_lambdify(model, derivation: str):
+def _load_lambdify(model, derivation: str, strict: bool):
     from .model.resolve import resolve_model
     from .runtime.lambdify import LambdifyDynamics
     from .symbolic.derivation import derive_equations
 
-    return LambdifyDynamics(derive_equations(resolve_model(model), derivation))
+    return LambdifyDynamics(derive_equations(resolve_model(model, strict), derivation))
 
 
 def _load_compiled(model, cache_dir=None, fast_math: bool = False, verbose=None,
-                   portable: bool = False, derivation: str = "auto"):
+                   portable: bool = False, derivation: str = "auto", strict: bool = False):
     from .build import cache
 
     digest = None
     if isinstance(model, (str, os.PathLike)):
-        options = [*cache.compile_flags(fast_math, portable), f"derivation={derivation}"]
+        # strict is in the key: a model accepted with a warning must not skip a strict check
+        options = [*cache.compile_flags(fast_math, portable), f"derivation={derivation}",
+                   f"strict={bool(strict)}"]
         digest = cache.input_key(model, options)
         folder = Path(cache_dir) if cache_dir else cache.default_cache_dir()
         module = cache.index_lookup(folder, digest) if digest else None
@@ -68,6 +73,6 @@ def _load_compiled(model, cache_dir=None, fast_math: bool = False, verbose=None,
     from .build.builder import load_compiled
     from .model.resolve import resolve_model
 
-    return load_compiled(resolve_model(model), cache_dir=cache_dir, fast_math=fast_math,
+    return load_compiled(resolve_model(model, strict), cache_dir=cache_dir, fast_math=fast_math,
                          verbose=verbose, portable=portable, model_ref=model,
                          input_digest=digest, derivation=derivation)

@@ -22,8 +22,9 @@ from ..bench import DESCRIPTION as BENCH_DESCRIPTION
 from ..errors import ModelError, NonFiniteStateError
 from ..sim.simulate import COMPILED_METHODS, SCIPY_METHODS
 
-MODEL_HELP = ("built-in name (rrr, chain:N), model file (.yaml, .yml, .json) or .urdf "
-              "(default: rrr, the paper's robot)")
+MODEL_HELP = ("built-in name (rrr, chain:N), model file (.yaml, .yml, .json), .urdf, or MuJoCo "
+              "MJCF (.xml, .mjcf; needs pip install gagen[mjcf]) (default: rrr, the paper's "
+              "robot)")
 
 
 # ------------------------------------------------------------------- argument types
@@ -86,6 +87,9 @@ def _add_numbers(p: argparse.ArgumentParser, flag: str, help: str, example: str)
 
 def _add_model(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", nargs="?", default="rrr", help=MODEL_HELP)
+    p.add_argument("--strict", action="store_true",
+                   help="refuse an inertia slightly off physical (CAD round-off), which "
+                   "otherwise loads with a warning")
 
 
 def _add_cache_dir(p: argparse.ArgumentParser) -> None:
@@ -198,7 +202,7 @@ def build_command(args: argparse.Namespace) -> int:
     from ..build.builder import build
     from ..model.resolve import resolve_model
 
-    model = resolve_model(args.model)
+    model = resolve_model(args.model, strict=args.strict)
     out = Path(args.out) if args.out else (Path("generated") / model.name if args.model == "rrr"
                                            else None)
     start = time.perf_counter()
@@ -217,7 +221,7 @@ def info_command(args: argparse.Namespace) -> int:
     """A model's coordinates, parameters and the API of its dynamics object."""
     from ..model.resolve import resolve_model
 
-    model = resolve_model(args.model)
+    model = resolve_model(args.model, strict=args.strict)
     print(f"model        {model.name}  ({model.source})")
     if model.description:
         print(f"description  {model.description}")
@@ -263,7 +267,8 @@ def simulate_command(args: argparse.Namespace) -> int:
                        backend=args.backend, cache_dir=args.cache_dir, method=args.method,
                        rtol=args.rtol, atol=args.atol, step=args.step,
                        target=_flat(args.target), kp=_flat(args.kp), kd=_flat(args.kd),
-                       gravity_compensation=not args.no_gravity_compensation, gif=args.gif)
+                       gravity_compensation=not args.no_gravity_compensation, gif=args.gif,
+                       strict=args.strict)
     print_simulate_report(run)
     return 0
 
@@ -273,7 +278,8 @@ def inverse_command(args: argparse.Namespace) -> int:
     from .runs import print_inverse_report, run_inverse
 
     run = run_inverse(args.model, duration=args.duration, points=args.points, out=args.out,
-                      backend=args.backend, cache_dir=args.cache_dir, qf=_flat(args.qf))
+                      backend=args.backend, cache_dir=args.cache_dir, qf=_flat(args.qf),
+                      strict=args.strict)
     print_inverse_report(run)
     return 0
 

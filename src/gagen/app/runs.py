@@ -118,12 +118,13 @@ def output_folder(out: str | Path | None, model) -> Path:
     return folder
 
 
-def load_dynamics(model, backend: str = "compiled", cache_dir: str | Path | None = None):
+def load_dynamics(model, backend: str = "compiled", cache_dir: str | Path | None = None,
+                  strict: bool = False):
     """(Model, dynamics) of a model as the user names it, with progress on the log."""
     from ..loading import load
     from ..model.resolve import resolve_model
 
-    resolved = resolve_model(model)
+    resolved = resolve_model(model, strict)
     log.info(f"loading '{resolved.name}' ({resolved.dof} coordinates) with the {backend} "
              "backend (the first compiled build of a model takes a few seconds)...")
     start = time.perf_counter()
@@ -142,12 +143,13 @@ def run_simulate(model="rrr", *, duration: float = 5.0, points: int = 501,
                  rtol: float = 1e-6, atol: float = 1e-8, step: float = 1e-3,
                  target: Sequence[float] | None = None, kp: Sequence[float] | None = None,
                  kd: Sequence[float] | None = None, gravity_compensation: bool = True,
-                 gif: bool = False) -> SimulateRun:
+                 gif: bool = False, strict: bool = False) -> SimulateRun:
     """Direct dynamics from rest at q = 0 under a PD law; writes the CSV and figures.
 
     `target` is in degrees (metres for prismatic joints); `target`, `kp`, `kd` each one
     value or one per coordinate, the controller's defaults (see the module) where None.
-    `method` None: dopri5 with the compiled backend, RK45 with lambdify.
+    `method` None: dopri5 with the compiled backend, RK45 with lambdify. `strict` refuses
+    an inertia slightly off physical (gagen.load).
     """
     from ..sim.controllers import PD, default_controller, is_paper_robot
     from ..sim.simulate import simulate
@@ -156,7 +158,7 @@ def run_simulate(model="rrr", *, duration: float = 5.0, points: int = 501,
     if method in COMPILED_METHODS and backend != "compiled":
         raise ValueError(f"--method {method} needs --backend compiled; use a scipy method "
                          "(e.g. RK45) with the lambdify backend")
-    model, dyn = load_dynamics(model, backend, cache_dir)
+    model, dyn = load_dynamics(model, backend, cache_dir, strict)
     controller = default_controller(dyn)
     if target is not None or kp is not None or kd is not None or not gravity_compensation:
         controller = PD(kp=controller.kp if kp is None else np.asarray(kp, dtype=float),
@@ -202,15 +204,16 @@ def print_simulate_report(run: SimulateRun) -> None:
 def run_inverse(model="rrr", *, duration: float = 5.0, points: int = 501,
                 out: str | Path | None = None, backend: str = "compiled",
                 cache_dir: str | Path | None = None,
-                qf: Sequence[float] | None = None) -> InverseRun:
+                qf: Sequence[float] | None = None, strict: bool = False) -> InverseRun:
     """Inverse dynamics along eq. 11 from q = 0 to `qf` (degrees, metres for prismatic
-    joints; one value or one per coordinate; None: the default target) in `duration` s."""
+    joints; one value or one per coordinate; None: the default target) in `duration` s.
+    `strict` refuses an inertia slightly off physical (gagen.load)."""
     from ..sim.controllers import default_target
     from ..sim.simulate import inverse_dynamics_along
     from ..sim.trajectory import Eq11Trajectory
     from .figures import fig4_inverse
 
-    model, dyn = load_dynamics(model, backend, cache_dir)
+    model, dyn = load_dynamics(model, backend, cache_dir, strict)
     final = default_target(model) if qf is None else to_model_units(qf, model)
     trajectory = Eq11Trajectory(np.zeros(dyn.n), final, duration)
     log.info(f"eq. 11 from q = 0 to {shown(final, model)} in Tp = {duration:g} s")

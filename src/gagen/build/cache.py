@@ -123,8 +123,23 @@ def input_key(model, flags: list[str]) -> str | None:
         except OSError:
             return None
         kind = f"file{path.suffix.lower()}"
+    extra = _referenced_files(path) if kind in ("file.xml", "file.mjcf") else []
+    if extra is None:
+        return None
     return _hash("gagen-input", kind, source, " ".join(flags), __version__,
-                 _packages_digest(PIPELINE_PACKAGES), *_binary_interface())
+                 _packages_digest(PIPELINE_PACKAGES), *_binary_interface(), *extra)
+
+
+def _referenced_files(path: Path) -> list[bytes] | None:
+    """An MJCF model also depends on the files it includes, its assets and MuJoCo's version
+    (None if they cannot be checked here: the model stage reports why)."""
+    from ..errors import ModelError
+    from ..model.mjcf_files import file_digest_parts
+
+    try:
+        return file_digest_parts(path)
+    except (ModelError, OSError):
+        return None
 
 
 def index_lookup(cache: Path, key: str):

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import hashlib
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import sympy as sp
 
-from ..errors import ModelError
+from ..errors import InertiaWarning, ModelError, one_line
 
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
 WORLD = "world"
@@ -42,6 +43,12 @@ def _exact_unit(x: float) -> sp.Expr:
     if abs(abs(x) - 1.0) < 1e-15:
         return sp.Integer(1 if x > 0 else -1)
     return sp.Float(x)
+
+
+def exact_units(values) -> list[sp.Expr]:
+    """Floats as SymPy numbers, entries within 1e-15 of 0 or +-1 made exact (see
+    `_exact_unit`): for rotation matrices, axes and offsets computed in floating point."""
+    return [_exact_unit(float(v)) for v in values]
 
 
 def _rot_x(a):
@@ -267,25 +274,93 @@ def _validate(model: Model) -> None:
         mass = _numeric(b.mass, values, src, f"{where}, mass")
         if mass < 0 or not math.isfinite(mass):
             raise ModelError(src, f"{where}, mass", f"mass must be non-negative, got {mass:g}")
-        inertia = np.array([[_numeric(e, values, src, f"{where}, inertia") for e in row]
-                            for row in b.inertia.tolist()])
-        check_inertia(inertia, src, f"{where}, inertia")
+        # The reader of the file warned about (or refused) a borderline inertia once.
+        check_inertia(_inertia_value(b, values, src), src, f"{where}, inertia",
+                      borderline="accept")
 
 
-def check_inertia(inertia: np.ndarray, source: str, element: str) -> None:
-    """Reject a central inertia tensor that no rigid body can have."""
+def _inertia_value(body: Body, values: dict[sp.Symbol, float], source: str) -> np.ndarray:
+    where = f"body '{body.name}', inertia"
+    return np.array([[_numeric(e, values, source, where) for e in row]
+                     for row in body.inertia.tolist()])
+
+
+def check_model_inertias(model: Model, strict: bool = False) -> None:
+    """`check_inertia` on every body of a Model at its default parameters: a borderline
+    inertia warns, or is refused when `strict` (for model files and Model objects, whose
+    construction accepts it silently)."""
+    values = {sp.Symbol(k): sp.Float(float(v)) for k, v in model.parameters.items()}
+    for b in model.bodies:
+        check_inertia(_inertia_value(b, values, model.source), model.source,
+                      f"body '{b.name}', inertia", strict=strict)
+
+
+# Real CAD exports round their inertias, and some are hand-tuned: the Allegro hand of
+# example-robot-data has links whose largest principal moment exceeds the sum of the other
+# two by 20 % of itself (2.30e-6 + 3.49e-6 < 7.27e-6), and Pinocchio loads it. Such a
+# tensor is accepted with an InertiaWarning up to these margins, as fractions of the largest
+# principal moment; strict=True refuses it, and anything beyond them is refused always.
+# The triangle inequality only decides whether some mass distribution has these moments
+# (the equations stay well posed), so its margin is wide; a negative principal moment can
+# make M(q) indefinite, so that margin is narrow.
+INERTIA_TRIANGLE_TOLERANCE = 0.25
+INERTIA_DEFINITE_TOLERANCE = 1e-2
+# Below this (relative) no defect is reported at all: floating-point rounding of R I R^T.
+_ROUNDING = 1e-9
+BORDERLINE = ("warn", "refuse", "accept")
+
+
+def check_inertia(inertia: np.ndarray, source: str, element: str, strict: bool = False,
+                  borderline: str | None = None) -> None:
+    """Refuse a central inertia tensor that no rigid body can have; warn for CAD round-off.
+
+    A tensor that breaks positive-definiteness or the triangle inequality by at most
+    `INERTIA_DEFINITE_TOLERANCE` / `INERTIA_TRIANGLE_TOLERANCE` of its largest principal
+    moment is borderline: it gets a `gagen.errors.InertiaWarning` naming the element and
+    the defect, or a ModelError when `strict`. `borderline` ("warn", "refuse", "accept")
+    overrides that choice: a Model's own validation accepts silently, since the reader
+    of the file has already warned or refused once.
+    """
+    mode = borderline or ("refuse" if strict else "warn")
+    if mode not in BORDERLINE:
+        raise ValueError(f"borderline must be one of {', '.join(BORDERLINE)}, got {mode!r}")
     if not np.all(np.isfinite(inertia)):
         raise ModelError(source, element, "inertia has non-finite entries")
     if not np.allclose(inertia, inertia.T, rtol=0, atol=1e-12 * max(1.0, np.abs(inertia).max())):
         raise ModelError(source, element, "inertia tensor is not symmetric")
-    eig = np.linalg.eigvalsh(inertia)
+    defect, tolerance = _inertia_defect(np.linalg.eigvalsh(inertia))
+    if defect is None:
+        return
+    if not tolerance:
+        raise ModelError(source, element, f"{defect}. Fix the inertia in the file: gagen "
+                         "accepts the round-off of CAD exports with a warning (unless "
+                         f"strict=True), up to {INERTIA_DEFINITE_TOLERANCE:g} of the largest "
+                         f"moment below zero and {INERTIA_TRIANGLE_TOLERANCE:g} of it beyond "
+                         "the triangle inequality, not this far")
+    if mode == "refuse":
+        raise ModelError(source, element, f"{defect}; within what gagen accepts from CAD "
+                         f"exports ({tolerance}) but refused because strict=True (load with "
+                         "strict=False to accept it with a warning, or fix the inertia)")
+    if mode == "warn":
+        warnings.warn(one_line(f"{source}: {element}: {defect}; within what gagen accepts "
+                               f"from CAD exports ({tolerance}), loaded anyway (strict=True "
+                               "refuses it)"), InertiaWarning, stacklevel=2)
+
+
+def _inertia_defect(eig: np.ndarray) -> tuple[str | None, str]:
+    """(the defect of sorted principal moments, or None; the tolerance it is within, or "")."""
     scale = max(1e-300, np.abs(eig).max())
-    tol = 1e-9 * scale
-    if eig.min() < -tol:
-        raise ModelError(source, element,
-                         f"inertia tensor is not positive semi-definite (principal moments {eig.tolist()})")
+    moments = eig.tolist()
     a, b, c = eig
-    if a + b < c - tol:
-        raise ModelError(source, element,
-                         f"principal moments {eig.tolist()} break the triangle inequality "
-                         "(each must be at most the sum of the other two)")
+    if a < -_ROUNDING * scale:
+        defect = f"inertia tensor is not positive semi-definite (principal moments {moments})"
+        within = -a <= INERTIA_DEFINITE_TOLERANCE * scale
+        return defect, f"{INERTIA_DEFINITE_TOLERANCE:g} of the largest moment" if within else ""
+    excess = (c - a - b) / scale
+    if excess > _ROUNDING:
+        defect = (f"principal moments {moments} break the triangle inequality (each must be "
+                  f"at most the sum of the other two; the largest exceeds it by {excess:.3g} "
+                  "of itself)")
+        within = excess <= INERTIA_TRIANGLE_TOLERANCE
+        return defect, f"{INERTIA_TRIANGLE_TOLERANCE:g} of the largest moment" if within else ""
+    return None, ""

@@ -21,6 +21,7 @@ from .model import (
     Limits,
     Model,
     ModelError,
+    check_model_inertias,
     inertia_matrix,
     rotation_from_rpy,
     vector,
@@ -30,17 +31,24 @@ from .model import (
 _SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
-def load_model_file(path: str | Path) -> Model:
-    """Read and validate a YAML or JSON model file (DESIGN.md section 4)."""
+def load_model_file(path: str | Path, strict: bool = False) -> Model:
+    """Read and validate a YAML or JSON model file (DESIGN.md section 4).
+
+    An inertia slightly off physical warns (`gagen.errors.InertiaWarning`), or is refused
+    when `strict`."""
     path = Path(path)
     data = read_description(path, "model file", inputs.MAX_MODEL_FILE_BYTES)
-    return parse_model_text(data, str(path), fmt=path.suffix.lower().lstrip("."))
+    return parse_model_text(data, str(path), fmt=path.suffix.lower().lstrip("."),
+                            strict=strict)
 
 
-def parse_model_text(text: str | bytes, source: str, fmt: str = "yaml") -> Model:
+def parse_model_text(text: str | bytes, source: str, fmt: str = "yaml",
+                     strict: bool = False) -> Model:
     """A Model from the text (or undecoded bytes) of a model file."""
     data = _parse_document(text, source, fmt)
-    return model_from_dict(data, source)
+    model = model_from_dict(data, source)
+    check_model_inertias(model, strict)
+    return model
 
 
 def _parse_document(text: str | bytes, source: str, fmt: str) -> dict:

@@ -1,4 +1,5 @@
-"""Resolve what the user names (a built-in, a model file, a URDF, a Model) into a Model."""
+"""Resolve what the user names (a built-in, a model file, a URDF, an MJCF file, a Model)
+into a Model."""
 
 from __future__ import annotations
 
@@ -6,15 +7,23 @@ from pathlib import Path
 
 from ..errors import ModelError
 from .builtin import is_builtin, load_builtin
-from .model import Model
+from .model import Model, check_model_inertias
 from .modelfile import load_model_file
 
 MODEL_SUFFIXES = (".yaml", ".yml", ".json")
+MJCF_SUFFIXES = (".xml", ".mjcf")
 
 
-def resolve_model(model: str | Path | Model) -> Model:
-    """A Model from a built-in name (`rrr`, `chain:N`), a model file, a URDF, or a Model."""
+def resolve_model(model: str | Path | Model, strict: bool = False) -> Model:
+    """A Model from a built-in name (`rrr`, `chain:N`), a model file, a URDF, an MJCF file
+    (.xml, .mjcf: through MuJoCo's compiler, `pip install gagen[mjcf]`), or a Model.
+
+    An inertia slightly off physical (CAD round-off) loads with a
+    `gagen.errors.InertiaWarning`; `strict=True` refuses it (also in a Model given as is).
+    """
     if isinstance(model, Model):
+        if strict:
+            check_model_inertias(model, strict=True)
         return model
     text = str(model)
     if isinstance(model, str) and is_builtin(text):
@@ -24,8 +33,12 @@ def resolve_model(model: str | Path | Model) -> Model:
     if suffix == ".urdf":
         from .urdf import load_urdf
 
-        return load_urdf(path)
+        return load_urdf(path, strict=strict)
+    if suffix in MJCF_SUFFIXES:
+        from .mjcf import load_mjcf
+
+        return load_mjcf(path, strict=strict)
     if suffix in MODEL_SUFFIXES:
-        return load_model_file(path)
+        return load_model_file(path, strict=strict)
     raise ModelError(text, "", "not a built-in model (rrr, chain:N) nor a file ending in "
-                     + ", ".join(MODEL_SUFFIXES + (".urdf",)))
+                     + ", ".join(MODEL_SUFFIXES + (".urdf",) + MJCF_SUFFIXES))

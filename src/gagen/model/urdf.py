@@ -11,16 +11,14 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
-from xml.parsers import expat
-from xml.parsers.expat import ExpatError
 
 import numpy as np
 import sympy as sp
 
 from .expressions import MAX_MAGNITUDE
-from .inputs import check_body_count, name_field, quote, read_description
+from .inputs import check_body_count, name_field, parse_untrusted_xml, quote, read_description
 from .merge import merge_fixed_joints, symmetric
 from .model import (
     JOINT_TYPES,
@@ -35,13 +33,11 @@ from .model import (
     rotation_from_rpy,
     vector,
 )
+from .parameters import parameterize_mass_properties
 
 GRAVITY = 9.81
 _UNSUPPORTED = ("floating", "planar")
 _INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
-# Parameter suffix -> (row, column) of the inertia tensor, in the order they are declared.
-_INERTIA_PARAMS = (("Ixx", 0, 0), ("Iyy", 1, 1), ("Izz", 2, 2),
-                   ("Ixy", 0, 1), ("Ixz", 0, 2), ("Iyz", 1, 2))
 
 
 @dataclass(frozen=True)
@@ -59,18 +55,21 @@ class _UrdfJoint:
     joint: Joint
 
 
-def load_urdf(path: str | Path) -> Model:
-    """Read a URDF file; errors are ModelError naming the file, the element and the reason."""
-    return parse_urdf_text(read_description(path, "URDF file"), str(path))
+def load_urdf(path: str | Path, strict: bool = False) -> Model:
+    """Read a URDF file; errors are ModelError naming the file, the element and the reason.
+
+    An inertia slightly off physical (CAD round-off) loads with a
+    `gagen.errors.InertiaWarning`, or is refused when `strict`."""
+    return parse_urdf_text(read_description(path, "URDF file"), str(path), strict)
 
 
-def parse_urdf_text(text: str | bytes, source: str = "<urdf>") -> Model:
+def parse_urdf_text(text: str | bytes, source: str = "<urdf>", strict: bool = False) -> Model:
     """Build the Model of a URDF document given as text or bytes; source names it in errors.
 
     Bytes are decoded as their XML declaration says (UTF-8 when there is none).
     """
     robot = _parse_xml(text, source)
-    links = _parse_links(robot, source)
+    links = _parse_links(robot, source, strict)
     joints = _parse_joints(robot, links, source)
     root, ordered = _tree_order(links, joints, source)
     if not any(j.joint.moves for j in ordered):
@@ -80,54 +79,17 @@ def parse_urdf_text(text: str | bytes, source: str = "<urdf>") -> Model:
     g = sp.Symbol("g")
     model = Model(name=_robot_name(robot, source), bodies=bodies,
                   parameters={"g": GRAVITY}, gravity=vector([0, 0, -g]), source=source)
-    return _parameterize(merge_fixed_joints(model))
+    return parameterize_mass_properties(merge_fixed_joints(model))
 
 
 # --- XML structure --------------------------------------------------------------------------
 
 def _parse_xml(text: str | bytes, source: str) -> ET.Element:
-    try:
-        root = _tree_from_expat(text)
-    except ExpatError as exc:
-        raise ModelError(source, f"line {exc.lineno}, column {exc.offset + 1}",
-                         f"malformed XML: {expat.ErrorString(exc.code)}") from None
-    except _DoctypeRefused:
-        raise ModelError(source, "<!DOCTYPE>", "a URDF must not declare a DTD or entities") from None
-    except (LookupError, ValueError, RecursionError, MemoryError) as exc:
-        raise ModelError(source, "", f"unreadable XML: {type(exc).__name__}") from None
+    root = parse_untrusted_xml(text, source, "a URDF")
     if root.tag != "robot":
         raise ModelError(source, f"<{quote(str(root.tag))[1:-1]}>",
                          "the root element of a URDF must be <robot>")
     return root
-
-
-class _DoctypeRefused(Exception):
-    pass
-
-
-def _refuse_doctype(*_args) -> None:
-    raise _DoctypeRefused
-
-
-def _tree_from_expat(text: str | bytes) -> ET.Element:
-    """An ElementTree from expat, refusing any DTD.
-
-    A URDF never needs one, and refusing it refuses entity expansion ("billion laughs")
-    and external entities whatever expat's own protections are. ElementTree's C parser
-    does not expose these handlers, so the tree is built here from expat's events.
-    """
-    parser = expat.ParserCreate()
-    builder = ET.TreeBuilder()
-    parser.StartDoctypeDeclHandler = _refuse_doctype
-    parser.EntityDeclHandler = _refuse_doctype
-    parser.ExternalEntityRefHandler = _refuse_doctype
-    parser.buffer_text = True
-    parser.ordered_attributes = False
-    parser.StartElementHandler = builder.start
-    parser.EndElementHandler = builder.end
-    parser.CharacterDataHandler = builder.data
-    parser.Parse(text, True)
-    return builder.close()
 
 
 def _robot_name(robot: ET.Element, source: str) -> str:
@@ -187,7 +149,7 @@ def _origin(parent: ET.Element, source: str, element: str) -> tuple[list, list]:
 
 # --- links ----------------------------------------------------------------------------------
 
-def _parse_links(robot: ET.Element, source: str) -> dict[str, _Link]:
+def _parse_links(robot: ET.Element, source: str, strict: bool) -> dict[str, _Link]:
     links: dict[str, _Link] = {}
     elements = robot.findall("link")
     check_body_count(len(elements), source, "<robot>")
@@ -195,13 +157,13 @@ def _parse_links(robot: ET.Element, source: str) -> dict[str, _Link]:
         name = _name_attr(elem, "name", source, f"link #{k + 1}")
         if name in links:
             raise ModelError(source, f"link {quote(name)}", "duplicate link name")
-        links[name] = _parse_link(elem, name, source)
+        links[name] = _parse_link(elem, name, source, strict)
     if not links:
         raise ModelError(source, "<robot>", "no <link> elements")
     return links
 
 
-def _parse_link(elem: ET.Element, name: str, source: str) -> _Link:
+def _parse_link(elem: ET.Element, name: str, source: str, strict: bool) -> _Link:
     where = f"link {quote(name)}, inertial"
     inertial = elem.find("inertial")
     if inertial is None:  # URDF: a link without <inertial> has no mass
@@ -217,7 +179,7 @@ def _parse_link(elem: ET.Element, name: str, source: str) -> _Link:
     tensor = sp.Matrix([[values["ixx"], values["ixy"], values["ixz"]],
                         [values["ixy"], values["iyy"], values["iyz"]],
                         [values["ixz"], values["iyz"], values["izz"]]])
-    check_inertia(np.array(tensor.tolist(), dtype=float), source, f"{where} inertia")
+    check_inertia(np.array(tensor.tolist(), dtype=float), source, f"{where} inertia", strict)
     # URDF gives the inertia in the inertial frame; gagen wants it along the body's axes.
     if any(a != 0 for a in rpy):
         rot = rotation_from_rpy(*rpy)
@@ -353,45 +315,3 @@ def _body(j: _UrdfJoint, link: _Link, root: str) -> Body:
     parent = WORLD if j.parent == root else j.parent
     return Body(name=link.name, parent=parent, joint=j.joint, mass=link.mass, com=link.com,
                 inertia=link.inertia)
-
-
-# --- parameters -----------------------------------------------------------------------------
-
-def _parameterize(model: Model) -> Model:
-    """Turn each massive body's mass, mass centre and inertia into named parameters."""
-    parameters = dict(model.parameters)
-    bodies = []
-    for body in model.bodies:
-        if _is_zero(body.mass) and all(_is_zero(e) for e in body.inertia):
-            bodies.append(body)  # massless: nothing to tune, keep plain zeros
-            continue
-        values = _body_parameters(body)
-        parameters.update(values)
-        bodies.append(_symbolic_body(body))
-    return Model(name=model.name, bodies=tuple(bodies), parameters=parameters,
-                 gravity=model.gravity, source=model.source, description=model.description)
-
-
-def _symbolic_body(body: Body) -> Body:
-    link = body.name
-    inertia = sp.ImmutableMatrix(3, 3, lambda r, c: sp.Symbol(_inertia_name(r, c, link)))
-    return replace(body, mass=sp.Symbol(f"m_{link}"),
-                   com=vector([sp.Symbol(f"c{a}_{link}") for a in "xyz"]), inertia=inertia)
-
-
-def _body_parameters(body: Body) -> dict[str, float]:
-    link = body.name
-    values = {f"m_{link}": float(body.mass)}
-    values.update({f"c{a}_{link}": float(body.com[i]) for i, a in enumerate("xyz")})
-    values.update({f"{key}_{link}": float(body.inertia[r, c]) for key, r, c in _INERTIA_PARAMS})
-    return values
-
-
-def _inertia_name(r: int, c: int, link: str) -> str:
-    r, c = min(r, c), max(r, c)
-    key = next(k for k, kr, kc in _INERTIA_PARAMS if (kr, kc) == (r, c))
-    return f"{key}_{link}"
-
-
-def _is_zero(expr) -> bool:
-    return sp.sympify(expr).is_zero is True

@@ -1,0 +1,172 @@
+"""Inertias of real CAD exports: a small breach of positive-definiteness or of the triangle
+inequality loads with a gagen.InertiaWarning, strict=True refuses it, a gross one is refused
+with advice. The real case: the Allegro hand of example-robot-data (tests/data/urdf), whose
+finger-tip links break the triangle inequality by 20 % of their largest moment."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import gagen
+from gagen.app.cli import main as cli_main
+from gagen.errors import InertiaWarning, ModelError
+from gagen.model.model import (
+    INERTIA_DEFINITE_TOLERANCE,
+    INERTIA_TRIANGLE_TOLERANCE,
+    check_inertia,
+)
+from gagen.model.modelfile import parse_model_text
+from gagen.model.resolve import resolve_model
+
+ALLEGRO = Path(__file__).resolve().parent / "data" / "urdf" / "allegro_right_hand.urdf"
+# The links whose moments break the triangle inequality (a copy of one finger's tip link
+# design in each finger, and the thumb's tip)
+ALLEGRO_DEFECTS = ("link_3.0", "link_7.0", "link_11.0", "link_15.0")
+
+
+def principal(a: float, b: float, c: float) -> np.ndarray:
+    """A tensor with principal moments a, b, c along tilted axes."""
+    rot, _ = np.linalg.qr(np.random.default_rng(0).normal(size=(3, 3)))
+    tensor = rot @ np.diag([a, b, c]) @ rot.T
+    return (tensor + tensor.T) / 2
+
+
+def inertia_warnings(record) -> list[str]:
+    return [str(w.message) for w in record if issubclass(w.category, InertiaWarning)]
+
+
+# ------------------------------------------------------------------------- check_inertia
+
+
+@pytest.mark.parametrize("moments, defect", [
+    ((2.30e-6, 3.49e-6, 7.27e-6), "break the triangle inequality"),  # the Allegro's
+    ((1.0, 1.0, 2.0 * (1 + INERTIA_TRIANGLE_TOLERANCE) - 1e-9), "triangle inequality"),
+    ((-0.5 * INERTIA_DEFINITE_TOLERANCE, 1.0, 1.0), "not positive semi-definite"),
+])
+def test_borderline_inertia_warns_and_strict_refuses(moments, defect):
+    tensor = principal(*moments)
+    with pytest.warns(InertiaWarning, match=rf"robot\.urdf: link 'l1': .*{defect}.*"
+                      r"strict=True refuses it"):
+        check_inertia(tensor, "robot.urdf", "link 'l1'")
+    with pytest.raises(ModelError, match=rf"link 'l1': .*{defect}.*refused because "
+                       r"strict=True \(load with strict=False"):
+        check_inertia(tensor, "robot.urdf", "link 'l1'", strict=True)
+
+
+@pytest.mark.parametrize("moments, defect", [
+    ((1.0, 1.0, 3.0), "break the triangle inequality"),
+    ((0.1, 0.1, 0.3), "break the triangle inequality"),
+    ((-2 * INERTIA_DEFINITE_TOLERANCE, 1.0, 1.0), "not positive semi-definite"),
+    ((-1.0, 1.0, 1.0), "not positive semi-definite"),
+])
+def test_gross_inertia_is_refused_with_advice(moments, defect):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # refused, not warned about
+        with pytest.raises(ModelError, match=rf"{defect}.*Fix the inertia in the file: gagen "
+                           r"accepts the round-off of CAD exports with a warning \(unless "
+                           r"strict=True\)"):
+            check_inertia(principal(*moments), "robot.urdf", "link 'l1'")
+
+
+@pytest.mark.parametrize("moments", [(1.0, 2.0, 3.0), (0.0, 1.0, 1.0), (1.0, 1.0, 2.0 + 1e-12),
+                                     (-1e-12, 1.0, 1.0)])
+def test_physical_inertia_and_rounding_pass_silently(moments):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_inertia(principal(*moments), "robot.urdf", "link 'l1'", strict=True)
+
+
+# ------------------------------------------------------------------------ the Allegro hand
+
+
+def test_allegro_loads_with_one_warning_per_defective_link():
+    with pytest.warns(InertiaWarning) as record:
+        model = resolve_model(ALLEGRO)
+    messages = inertia_warnings(record)
+    assert len(messages) == len(ALLEGRO_DEFECTS)
+    for link, message in zip(ALLEGRO_DEFECTS, messages, strict=True):
+        assert f"link '{link}', inertial inertia" in message
+        assert "break the triangle inequality" in message
+    assert model.dof == 16
+
+
+def test_allegro_strict_is_refused():
+    with pytest.raises(ModelError, match=r"allegro_right_hand\.urdf: link 'link_3\.0', "
+                       r"inertial inertia: principal moments .*2\.30064.*triangle inequality"
+                       r".*strict=True"):
+        resolve_model(ALLEGRO, strict=True)
+    for backend in ("lambdify", "compiled"):  # refused before anything is derived or built
+        with pytest.raises(ModelError, match="strict=True"):
+            gagen.load(ALLEGRO, backend=backend, strict=True)
+
+
+@pytest.mark.slow
+def test_allegro_dynamics_match_pinocchio():
+    pin = pytest.importorskip("pinocchio")
+    with pytest.warns(InertiaWarning):
+        dyn = gagen.load(ALLEGRO, backend="lambdify")
+    model = pin.buildModelFromUrdf(str(ALLEGRO))
+    data = model.createData()
+    order = [model.getJointId(name) - 1 for name in dyn.coordinates]
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        q = rng.uniform(-1, 1, dyn.n)
+        q_pin = np.zeros(model.nq)
+        q_pin[order] = q
+        mass = pin.crba(model, data, q_pin)
+        mass = np.triu(mass) + np.triu(mass, 1).T
+        np.testing.assert_allclose(dyn.mass_matrix(q), mass[np.ix_(order, order)],
+                                   rtol=1e-9, atol=1e-12)
+
+
+def test_cli_strict_flag(capsys):
+    assert cli_main(["info", "--strict", str(ALLEGRO)]) != 0
+    assert "strict=True" in capsys.readouterr().err
+    with pytest.warns(InertiaWarning):
+        assert cli_main(["info", str(ALLEGRO)]) == 0
+    assert "coordinates  16" in capsys.readouterr().out
+
+
+# --------------------------------------------------------- model files and Model objects
+
+
+BORDERLINE_YAML = """
+name: tip
+parameters: {g: 9.81}
+bodies:
+  - name: tip
+    parent: world
+    joint: {name: q1, type: revolute, axis: [0, 0, 1]}
+    mass: 1
+    com: [0.1, 0, 0]
+    inertia: [1.0, 1.0, 2.2, 0, 0, 0]
+"""
+
+
+def test_model_file_borderline_inertia_warns_once_and_strict_refuses():
+    with pytest.warns(InertiaWarning) as record:
+        model = parse_model_text(BORDERLINE_YAML, "tip.yaml")
+    assert inertia_warnings(record) == [m for m in inertia_warnings(record)
+                                        if "tip.yaml: body 'tip', inertia" in m]
+    assert len(inertia_warnings(record)) == 1
+    with pytest.raises(ModelError, match=r"tip\.yaml: body 'tip', inertia: .*strict=True"):
+        parse_model_text(BORDERLINE_YAML, "tip.yaml", strict=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert resolve_model(model) is model  # a Model is taken as it is...
+    with pytest.raises(ModelError, match="strict=True"):
+        resolve_model(model, strict=True)  # ...unless strict
+
+
+@pytest.mark.slow
+def test_cached_model_accepted_with_a_warning_is_still_refused_when_strict(tmp_path):
+    path = tmp_path / "tip.yaml"
+    path.write_text(BORDERLINE_YAML)
+    with pytest.warns(InertiaWarning):
+        gagen.load(path, cache_dir=tmp_path / "cache", verbose=False)
+    with pytest.raises(ModelError, match="strict=True"):
+        gagen.load(path, cache_dir=tmp_path / "cache", strict=True)
