@@ -1,10 +1,10 @@
-"""How build time, code size and call time grow with the robot: chain:2 ... chain:12, UR5, Panda.
+"""How build time, memory and call time grow with the robot: chain:5 ... chain:50 and the
+shared robots (UR5, Panda, ANYmal C, Talos reduced and full, Tiago; fixed bases).
 
-For each model: a cold build (nothing cached, SymPy's cache cleared) timed stage by stage
-as `gagen.build.build` reports it (derive; generate, which includes CSE; compile, which
-is Cython and the C compiler in a subprocess), the operation counts before and after
-CSE; then every module is loaded and `forward_dynamics` at a fixed state is timed, all
-models interleaved (gagen.bench.timing).
+For each model: a cold build in a fresh process (gagen.bench.coldbuild: stage times, wall
+time, peak memory of the process tree), then forward dynamics, inverse dynamics and the
+mass matrix per call from Python against Pinocchio's aba, rnea and crba, and per state in
+the batched loop (against Pinocchio in C++ with --cpp). See gagen.bench.scaling.
 
     python benchmarks/scaling.py                         # all default models, fresh cache
     python benchmarks/scaling.py --models chain:2 chain:6 --out bench-out
@@ -33,7 +33,7 @@ DEFAULT_MODELS, _MISSING = scaling_models(full=True)
 def write_outputs(rows: list[dict], out: Path, header: str = "") -> None:
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "scaling.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=COLUMNS)
+        writer = csv.DictWriter(f, fieldnames=COLUMNS, extrasaction="ignore")
         writer.writeheader()
         writer.writerows(rows)
     (out / "scaling.md").write_text(header + markdown_table(rows) + "\n")
@@ -51,6 +51,9 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"interleaved repeats of the forward-dynamics timing "
                         f"(default {REPEATS})")
     parser.add_argument("--out", metavar="DIR", help="write scaling.md and scaling.csv here")
+    parser.add_argument("--cpp", action="store_true",
+                        help="also time Pinocchio in C++ over stacked states (compiles a "
+                        "harness against the pin wheel's headers: a minute or two)")
     args = parser.parse_args(argv)
     if args.models is DEFAULT_MODELS:
         for note in _MISSING:
@@ -59,16 +62,13 @@ def main(argv: list[str] | None = None) -> int:
         tempfile.mkdtemp(prefix="gagen-scaling-"))
     print(f"building into {cache}", file=sys.stderr)
 
-    def progress(row):
-        print(f"  {row['model']:<12} derive {row['derive_s']:6.2f} s  generate "
-              f"{row['generate_s']:6.2f} s  compile {row['compile_s']:6.2f} s  "
-              f"ops {row['ops_before_cse']} -> {row['ops_after_cse']}", file=sys.stderr,
-              flush=True)
+    def progress(text):
+        print(f"  {text}", file=sys.stderr, flush=True)
 
-    rows = scaling_rows(args.models, cache, args.repeats, progress=progress)
-    header = (f"Cold builds with gagen {gagen.__version__} (`build(model, cache_dir=fresh)`); "
-              f"FD: median of {args.repeats} interleaved timeit repeats of "
-              "`dyn.forward_dynamics(q, qd, tau)` at a fixed state.\n\n")
+    rows = scaling_rows(args.models, cache, args.repeats, progress=progress, cpp=args.cpp)
+    header = (f"Cold builds with gagen {gagen.__version__}, each in a fresh process; per "
+              f"call: medians of {args.repeats} interleaved timeit repeats against "
+              "Pinocchio; batched: per state over 1000 stacked states.\n\n")
     print(markdown_table(rows))
     if args.out:
         write_outputs(rows, Path(args.out), header)

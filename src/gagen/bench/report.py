@@ -87,17 +87,9 @@ def batched_table(rows: list[dict]) -> str:
 
 
 def scaling_table(rows: list[dict]) -> str:
-    lines = [("| model | dof | derive s | generate s (incl. CSE) | compile s | ops before CSE "
-             "| ops after CSE | before/after | FD µs/call (IQR) |"),
-             "|---|--:|--:|--:|--:|--:|--:|--:|--:|"]
-    for r in rows:
-        cached = " (cached)" if r.get("cached") else ""
-        lines.append(f"| {r['model']}{cached} | {r['dof']} | {_num(r['derive_s'])} "
-                     f"| {_num(r['generate_s'])} | {_num(r['compile_s'])} "
-                     f"| {r['ops_before_cse']:,} | {r['ops_after_cse']:,} "
-                     f"| {_ratio(r['cse_ratio'])} | {_num(r['fd_us'])} "
-                     f"({_num(r['fd_iqr_us'], 2)}) |")
-    return "\n".join(lines)
+    from .scaling import markdown_table
+
+    return markdown_table(rows)
 
 
 HOW = """\
@@ -185,11 +177,16 @@ def markdown(results: dict, images: dict | None = None) -> str:
     sc = results.get("scaling", {})
     lines += _section(
         results, "scaling", "Scaling: build and call time against the robot's size",
-        "Cold builds (SymPy's cache cleared, a fresh cache folder): derive, generate "
-        "(including CSE) and compile (Cython and the C compiler) as `gagen.build.build` "
-        "reports them; operations counted before and after CSE. FD: "
-        f"`dyn.forward_dynamics(q, qd, tau)` at a fixed state, {sc.get('repeats', '?')} "
-        "repeats, all models interleaved.", scaling_table, None, images)
+        "Cold builds, each in a fresh process and cache folder: derive, generate and "
+        "compile (Cython and the C compiler, as many at once as there are cores) as "
+        "`gagen.build.build` reports them, the build's wall time and the peak memory of "
+        "its process tree. Then, per model, gagen's forward dynamics, inverse dynamics and "
+        "mass matrix per call from Python against Pinocchio's `aba`, `rnea` and `crba` "
+        f"(Pinocchio's own URDF parse; {sc.get('repeats', '?')} interleaved repeats), and "
+        "per state in gagen's batched loop (1000 stacked states) against Pinocchio's "
+        "algorithms in a C++ loop compiled with -O3 -march=native, where available. "
+        "(×): Pinocchio's time as a multiple of gagen's (> 1: gagen is faster).",
+        scaling_table, None, images)
     notes = results.get("notes") or []
     if notes:
         lines += ["## Notes", ""] + [f"- {n}" for n in notes] + [""]
@@ -272,38 +269,49 @@ def plot_simulation(rows: list[dict], path: Path) -> None:
 
 
 def plot_scaling(rows: list[dict], path: Path) -> None:
-    fig = _figure((10, 4))
+    """Left: the cold build's stages against the degrees of freedom; right: per-call
+    times of gagen and Pinocchio (solid: chains, markers: the URDF robots)."""
+    from matplotlib.ticker import MaxNLocator
+
+    fig = _figure((11, 4.2))
     left, right = fig.subplots(1, 2)
     chains = [r for r in rows if r["model"].startswith("chain:")]
     others = [r for r in rows if not r["model"].startswith("chain:")]
-    series = (("derive_s", "derive", "tab:blue"), ("generate_s", "generate (incl. CSE)",
-              "tab:orange"), ("compile_s", "compile", "tab:green"))
     markers = "sD^v<>p*"
-    for key, label, colour in series:
+    stages = (("derive_s", "derive", "tab:blue"), ("generate_s", "generate", "tab:orange"),
+              ("compile_s", "compile", "tab:green"), ("build_s", "whole build (wall)",
+                                                      "black"))
+    for key, label, colour in stages:
         left.plot([r["dof"] for r in chains], [r[key] for r in chains], "o-", color=colour,
-                  label=f"{label}, chain:N")
+                  label=label, markersize=4)
         for k, r in enumerate(others):
             left.plot([r["dof"]], [r[key]], markers[k % len(markers)], color=colour,
-                      markersize=8, markerfacecolor="none")
-    right.plot([r["dof"] for r in chains], [r["fd_us"] for r in chains], "o-",
-               color="tab:red", label="chain:N")
+                      markersize=7, markerfacecolor="none")
     for k, r in enumerate(others):
-        marker = markers[k % len(markers)]
-        right.plot([r["dof"]], [r["fd_us"]], marker, color="tab:red", markersize=8,
-                   markerfacecolor="none", label=r["model"])
-        left.plot([], [], marker, color="black", markerfacecolor="none", label=r["model"])
-    left.set_title("Cold build, per stage")
+        left.plot([], [], markers[k % len(markers)], color="grey", markerfacecolor="none",
+                  label=r["model"])
+    kernels = (("fd", "FD", "tab:red"), ("id", "ID", "tab:purple"), ("M", "M", "tab:cyan"))
+    for key, label, colour in kernels:
+        right.plot([r["dof"] for r in chains], [r[f"{key}_us"] for r in chains], "o-",
+                   color=colour, markersize=4, label=f"gagen {label}")
+        right.plot([r["dof"] for r in chains], [r[f"pin_{key}_us"] for r in chains], "o--",
+                   color=colour, markersize=4, markerfacecolor="none",
+                   label=f"Pinocchio {label}")
+        for k, r in enumerate(others):
+            right.plot([r["dof"]], [r[f"{key}_us"]], markers[k % len(markers)], color=colour,
+                       markersize=7)
+            right.plot([r["dof"]], [r[f"pin_{key}_us"]], markers[k % len(markers)],
+                       color=colour, markersize=7, markerfacecolor="none")
+    left.set_title("Cold build (chains: lines; robots: markers)")
     left.set_ylabel("seconds")
-    right.set_title("Forward dynamics per call, from Python")
+    right.set_title("Per call from Python (filled: gagen, open/dashed: Pinocchio)")
     right.set_ylabel("µs per call (median)")
-    from matplotlib.ticker import MaxNLocator
-
     for ax in (left, right):
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_yscale("log")
-        ax.set_xlabel("N (degrees of freedom)")
+        ax.set_xlabel("degrees of freedom")
         ax.grid(which="both", alpha=0.3)
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=6, ncol=2)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 

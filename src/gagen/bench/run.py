@@ -146,18 +146,9 @@ class Bench:
         cache = self.scratch / "scaling"
         self.progress("scaling", f"cold builds of {', '.join(_short(m) for m in models)} "
                       f"into {cache}")
-
-        def built(row):
-            if math.isnan(row["fd_us"]):
-                self.progress("scaling", f"{row['model']:<10} derive {row['derive_s']:6.2f} s  "
-                              f"generate {row['generate_s']:6.2f} s  compile "
-                              f"{row['compile_s']:6.2f} s  ops {row['ops_before_cse']} -> "
-                              f"{row['ops_after_cse']}")
-
-        rows = scaling_rows(models, cache, s.scaling_repeats, s.target_s, progress=built,
-                            loaded=self.loaded)
-        self.progress("scaling", "forward dynamics: " + ", ".join(
-            f"{r['model']} {r['fd_us']:.2f} µs" for r in rows))
+        rows = scaling_rows(models, cache, s.scaling_repeats, s.target_s,
+                            progress=lambda text: self.progress("scaling", text),
+                            loaded=self.loaded, cpp=s.mode == "full")
         return {"rows": rows, "repeats": s.scaling_repeats}
 
     def panda(self) -> dict:

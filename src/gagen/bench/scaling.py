@@ -1,10 +1,13 @@
-"""How build time, code size and call time grow with the robot.
+"""How build time, memory and call time grow with the robot, against Pinocchio.
 
-For each model: a cold build (SymPy's cache cleared, a fresh cache folder) timed stage by
-stage as `gagen.build.build` reports it (derive; generate, which includes CSE; compile,
-which is Cython and the C compiler in a subprocess), the operation counts before and
-after CSE; then every built module is loaded and `forward_dynamics` at a fixed state is
-timed, all models interleaved in one run.
+For each model: a cold build in a fresh process (a new cache folder), timed stage by
+stage as `gagen.build.build` reports it (derive; generate; compile: Cython and the C
+compiler, in parallel), with its wall time and the peak memory of the whole process tree
+(gagen.bench.coldbuild); then the module is loaded and forward dynamics, inverse dynamics
+and the mass matrix are timed per call from Python against Pinocchio's `aba`, `rnea` and
+`crba` (interleaved), and per state in gagen's batched C loop (1000 stacked states),
+against Pinocchio's algorithms in its own C++ loop where that can be compiled
+(gagen.bench.pinocchio_cpp).
 
 `derivation_rows` is the derivation-only study (no C): time, intermediates and operation
 counts of the structured equations and after CSE.
@@ -12,32 +15,44 @@ counts of the structured equations and after CSE.
 
 from __future__ import annotations
 
+import math
 import statistics
 import time
 from pathlib import Path
 
+import numpy as np
 import sympy as sp
 from sympy.core.cache import clear_cache
 
-from .common import PANDA, UR5, compiled, find_urdf_dir, fixed_state
+from .common import PANDA, UR5, find_urdf_dir, fixed_state, optional
 from .timing import DEFAULT_TARGET, Candidate, interleaved
 
 REPEATS = 7
 DEFAULT_CHAINS = (2, 4, 6)
-FULL_CHAINS = tuple(range(2, 13))
-COLUMNS = ("model", "dof", "derive_s", "generate_s", "compile_s", "build_s", "ops_before_cse",
-           "ops_after_cse", "cse_ratio", "load_s", "fd_us", "fd_iqr_us", "cached")
+FULL_CHAINS = (5, 10, 15, 20, 24, 30, 40, 50)
+# the robots of the full study: arms, a quadruped and humanoids/mobile manipulators (fixed
+# base), from the shared URDFs
+FULL_URDFS = (UR5, PANDA, "anymal_c.urdf", "talos_reduced.urdf", "talos_full_v2.urdf",
+              "tiago.urdf")
+BATCH = 1000  # stacked states of the batched loop
+KERNELS = (("fd", "forward_dynamics", "aba"), ("id", "inverse_dynamics", "rnea"),
+           ("M", "mass_matrix", "crba"))
+COLUMNS = ("model", "dof", "derive_s", "generate_s", "compile_s", "build_s", "peak_mb",
+           "ops_before_cse", "ops_after_cse", "fd_us", "id_us", "M_us", "pin_fd_us",
+           "pin_id_us", "pin_M_us", "fd_state_us", "id_state_us", "M_state_us",
+           "cpp_fd_us", "cpp_id_us", "cpp_M_us", "cached")
 
 
 def scaling_models(full: bool = False, urdf_dir=None) -> tuple[list[str], list[str]]:
     """The models of the study and notes on what was left out.
 
-    Default: chain:2, chain:4, chain:6 and the UR5; full: chain:2 ... chain:12, the UR5
-    and the Panda. The URDFs come from `find_urdf_dir(urdf_dir)`.
+    Default: chain:2, chain:4, chain:6 and the UR5; full: chain:5 ... chain:50, the arms
+    (UR5, Panda), ANYmal C, Talos (reduced and full) and Tiago, with fixed bases. The URDFs
+    come from `find_urdf_dir(urdf_dir)`.
     """
     models = [f"chain:{n}" for n in (FULL_CHAINS if full else DEFAULT_CHAINS)]
     notes = []
-    for name in (UR5, PANDA) if full else (UR5,):
+    for name in FULL_URDFS if full else (UR5,):
         folder = find_urdf_dir(urdf_dir, needed=name)
         if folder is None:
             where = f"in {urdf_dir}" if urdf_dir else "(no ../shared/urdf next to the " \
@@ -58,69 +73,149 @@ def _slug(name: str) -> str:
 
 
 def build_row(name: str, cache_dir: Path) -> tuple[dict, object]:
-    """Build one model cold into `cache_dir`; the row (without FD timing) and its dynamics."""
+    """Build one model cold, in a fresh process, into `cache_dir`; its row (build columns
+    only) and its dynamics, loaded from that cache entry."""
+    from ..build.builder import import_extension
     from ..model.resolve import resolve_model
+    from ..runtime.compiled import CompiledDynamics
+    from .coldbuild import measured_build
 
     model = resolve_model(name)
-    clear_cache()  # a cold derivation: nothing reused from earlier models
-    dyn, report, times = compiled(model, cache_dir)
+    report = measured_build(name, cache_dir)
     nan = float("nan")
-    stages = report.stages
-    row = {
+    stages = report["stages"]
+    start = time.perf_counter()
+    dyn = CompiledDynamics(import_extension(Path(report["module"]), report["module_name"]),
+                           model)
+    row = {key: nan for key in COLUMNS}
+    row.update({
         "model": display_name(name, model),
         "dof": model.dof,
         "derive_s": stages.get("derive", nan),
         "generate_s": stages.get("generate", nan),
         "compile_s": stages.get("compile", nan),
-        "build_s": times["build_s"],
-        "ops_before_cse": report.ops_before_cse,
-        "ops_after_cse": report.ops_after_cse,
-        "cse_ratio": (report.ops_before_cse / report.ops_after_cse
-                      if report.ops_after_cse else nan),
-        "load_s": times["load_s"],
-        "fd_us": nan,
-        "fd_iqr_us": nan,
-        "cached": report.cached,
-    }
+        "build_s": report["wall_s"],
+        "peak_mb": report["peak_mb"],
+        "ops_before_cse": report["ops_before_cse"],
+        "ops_after_cse": report["ops_after_cse"],
+        "load_s": time.perf_counter() - start,
+        "cached": report["cached"],
+    })
     return row, dyn
 
 
-def scaling_rows(models, cache_dir, repeats: int = REPEATS, target: float = DEFAULT_TARGET,
-                 progress=None, loaded: dict | None = None) -> list[dict]:
-    """One row per model, each built in its own sub-folder of `cache_dir`.
+def pinocchio_peer(name: str, model):
+    """Pinocchio's model of the same robot, as its users build it (its own URDF parser; for
+    built-ins and model files gagen's builder with Pinocchio's specialised joints), or None
+    when Pinocchio is not installed."""
+    pin = optional("pinocchio")
+    if pin is None:
+        return None
+    if str(name).lower().endswith(".urdf"):
+        return pin.buildModelFromUrdf(str(name))
+    from ..reference.pinocchio import pinocchio_model
 
-    `progress(row)` is called after each build (fd_us still NaN). The forward dynamics
-    of all models are timed at the end, interleaved. `loaded`, a dict, receives each
-    model's dynamics object under its name in `models`.
+    return pinocchio_model(model, aligned=True)
+
+
+def time_model(row: dict, dyn, peer, repeats: int, target: float) -> None:
+    """Per call from Python (gagen and Pinocchio, interleaved) and per state in gagen's
+    batched loop, into `row`."""
+    pin = optional("pinocchio")
+    n = dyn.n
+    q, qd, tau = fixed_state(n)
+    stack = [np.tile(x, (BATCH, 1)) for x in (q, qd, tau)]
+    candidates = []
+    for key, method, peer_name in KERNELS:
+        fn = getattr(dyn, method)
+        args = (q,) if key == "M" else (q, qd, tau)
+        candidates.append(Candidate(f"{key}_us", fn, args))
+        candidates.append(Candidate(f"{key}_state_us", fn,
+                                    tuple(stack[:1] if key == "M" else stack)))
+        if peer is not None:
+            data = peer.createData()
+            pq = _peer_configuration(pin, peer, n)
+            pargs = (peer, data, pq) if key == "M" else (peer, data, pq, qd, tau)
+            candidates.append(Candidate(f"pin_{key}_us", getattr(pin, peer_name), pargs))
+    for cand, timing in zip(candidates, interleaved(candidates, repeats, target)):
+        per = BATCH if cand.name.endswith("_state_us") else 1
+        row[cand.name] = timing.median * 1e6 / per
+
+
+def _peer_configuration(pin, peer, n: int) -> np.ndarray:
+    """A configuration of Pinocchio's model of the robot (its nq can exceed n: continuous
+    joints as cos/sin pairs)."""
+    if peer.nq == n:
+        return fixed_state(n)[0]
+    return pin.neutral(peer)
+
+
+def scaling_rows(models, cache_dir, repeats: int = REPEATS, target: float = DEFAULT_TARGET,
+                 progress=None, loaded: dict | None = None, cpp: bool = False) -> list[dict]:
+    """One row per model, each built cold in its own sub-folder of `cache_dir`, then timed.
+
+    `progress(text)` reports each step. `loaded`, a dict, receives each model's dynamics
+    under its name in `models`. With `cpp`, Pinocchio's algorithms are also timed in C++
+    over stacked states (gagen.bench.pinocchio_cpp), the peer of the batched loop.
     """
-    rows, cands = [], []
+    harness, why = (None, "")
+    if cpp:
+        from .pinocchio_cpp import build_harness
+
+        if progress:
+            progress("compiling the Pinocchio C++ harness (a minute or two)")
+        harness, why = build_harness(Path(cache_dir) / "pinocchio-cpp")
+        if harness is None and progress:
+            progress(f"no C++ peer: {why}")
+    rows = []
     for k, name in enumerate(models):
         row, dyn = build_row(name, Path(cache_dir) / f"{k:02d}-{_slug(name)}")
-        q, qd, tau = fixed_state(dyn.n)
-        dyn.forward_dynamics(q, qd, tau)  # fail here rather than in the timer
-        cands.append(Candidate(row["model"], dyn.forward_dynamics, (q, qd, tau)))
+        if progress:
+            progress(f"{row['model']:<14} built in {row['build_s']:6.1f} s (derive "
+                     f"{row['derive_s']:.1f}, generate {row['generate_s']:.1f}, compile "
+                     f"{row['compile_s']:.1f}), peak {row['peak_mb']:.0f} MB")
+        peer = pinocchio_peer(name, dyn.model)
+        time_model(row, dyn, peer, repeats, target)
+        if harness is not None and peer is not None:
+            from .pinocchio_cpp import cpp_times
+
+            times = cpp_times(harness, peer, Path(cache_dir) / "pinocchio-cpp")
+            row.update({"cpp_fd_us": times["aba"], "cpp_id_us": times["rnea"],
+                        "cpp_M_us": times["crba"]})
+        if progress:
+            progress(f"{row['model']:<14} per call FD {row['fd_us']:.2f} µs (Pinocchio "
+                     f"{row['pin_fd_us']:.2f}), ID {row['id_us']:.2f} ({row['pin_id_us']:.2f}), "
+                     f"M {row['M_us']:.2f} ({row['pin_M_us']:.2f}); batched per state FD "
+                     f"{row['fd_state_us']:.2f} (C++ {row['cpp_fd_us']:.2f})")
         rows.append(row)
         if loaded is not None:
             loaded[name] = dyn
-        if progress:
-            progress(row)
-    if cands:
-        for row, t in zip(rows, interleaved(cands, repeats, target)):
-            row["fd_us"], row["fd_iqr_us"] = t.median * 1e6, t.iqr * 1e6
     return rows
 
 
 def markdown_table(rows: list[dict]) -> str:
-    head = ("| model | dof | derive s | generate s (incl. CSE) | compile s | ops before CSE "
-            "| ops after CSE | ratio | FD µs/call (IQR) |")
-    lines = [head, "|---|--:|--:|--:|--:|--:|--:|--:|--:|"]
+    """Build columns, then each kernel: gagen per call and Pinocchio's ratio to it."""
+    head = ("| model | dof | derive s | generate s | compile s | build s | peak MB "
+            "| FD µs (Pinocchio ×) | ID µs (×) | M µs (×) | batched FD µs/state (C++ ×) "
+            "| ID (×) | M (×) |")
+    lines = [head, "|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|"]
     for r in rows:
-        cached = " (cached)" if r["cached"] else ""
-        lines.append(
-            f"| {r['model']}{cached} | {r['dof']} | {r['derive_s']:.2f} | {r['generate_s']:.2f} "
-            f"| {r['compile_s']:.2f} | {r['ops_before_cse']} | {r['ops_after_cse']} "
-            f"| {r['cse_ratio']:.2f} | {r['fd_us']:.2f} ({r['fd_iqr_us']:.2f}) |")
+        cells = [f"{r[k]:.2f}" for k in ("derive_s", "generate_s", "compile_s")]
+        cells += [f"{r['build_s']:.1f}", f"{r['peak_mb']:.0f}"]
+        for key in ("fd", "id", "M"):
+            cells.append(_with_ratio(r[f"{key}_us"], r[f"pin_{key}_us"]))
+        for key in ("fd", "id", "M"):
+            cells.append(_with_ratio(r[f"{key}_state_us"], r[f"cpp_{key}_us"]))
+        cached = " (cached)" if r.get("cached") else ""
+        lines.append(f"| {r['model']}{cached} | {r['dof']} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def _with_ratio(mine: float, peer: float) -> str:
+    """`mine` and the peer's time as a multiple of it (> 1: gagen is faster)."""
+    if peer is None or not math.isfinite(peer):
+        return f"{mine:.2f}"
+    return f"{mine:.2f} ({peer / mine:.1f}×)"
 
 
 # --------------------------------------------------------------------------- derivation

@@ -16,9 +16,13 @@ import numpy as np
 from ..model.numeric import NumericModel, numeric_model
 
 
-def pinocchio_model(model, p=None) -> Any:
+def pinocchio_model(model, p=None, aligned: bool = False) -> Any:
     """A pinocchio.Model with the same tree, inertias and gravity as a gagen Model (at its
-    defaults overridden by `p`) or a NumericModel. ImportError if Pinocchio is missing."""
+    defaults overridden by `p`) or a NumericModel. ImportError if Pinocchio is missing.
+
+    With `aligned`, a joint whose axis is a coordinate axis is Pinocchio's specialised
+    RX/RY/RZ (PX/PY/PZ), as Pinocchio's URDF parser makes it, instead of the general
+    "unaligned" joint: the fair peer for timing."""
     import pinocchio as pin
 
     nm = model if isinstance(model, NumericModel) else numeric_model(model, p)
@@ -34,8 +38,7 @@ def pinocchio_model(model, p=None) -> Any:
         if b.coordinate is None:
             joint_id, body_place = parent_joint, origin
         else:
-            joint = (pin.JointModelRevoluteUnaligned(b.axis) if b.rotates
-                     else pin.JointModelPrismaticUnaligned(b.axis))
+            joint = _joint_model(pin, b.axis, b.rotates, aligned)
             joint_id = pm.addJoint(parent_joint, joint, origin, nm.coordinates[b.coordinate])
             body_place = pin.SE3.Identity()
             order.append(b.coordinate)
@@ -46,6 +49,16 @@ def pinocchio_model(model, p=None) -> Any:
         raise RuntimeError(f"the Pinocchio model has nq={pm.nq}, nv={pm.nv}; expected {nm.dof}")
     pm.gagen_order = np.array(order, dtype=int)
     return pm
+
+
+def _joint_model(pin, axis, rotates: bool, aligned: bool):
+    unit = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    if aligned:
+        for k, name in enumerate("XYZ"):
+            if np.array_equal(unit, np.eye(3)[k]):
+                return getattr(pin, f"JointModel{'R' if rotates else 'P'}{name}")()
+    return (pin.JointModelRevoluteUnaligned(unit) if rotates
+            else pin.JointModelPrismaticUnaligned(unit))
 
 
 def to_pinocchio(pm, *vectors) -> list[np.ndarray]:
