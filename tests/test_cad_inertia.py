@@ -170,3 +170,56 @@ def test_cached_model_accepted_with_a_warning_is_still_refused_when_strict(tmp_p
         gagen.load(path, cache_dir=tmp_path / "cache", verbose=False)
     with pytest.raises(ModelError, match="strict=True"):
         gagen.load(path, cache_dir=tmp_path / "cache", strict=True)
+
+
+# ------------------------------------------------------- rigid units: welded parts, sensors
+
+def _welded_sensor_urdf(sensor_moments: tuple[float, float, float], arm_moments=(1, 1, 1)):
+    """An arm link on a revolute joint with a camera welded to it (a fixed joint)."""
+    ixx, iyy, izz = sensor_moments
+    ax, ay, az = arm_moments
+    return f"""<robot name="welded">
+      <link name="base"/>
+      <link name="arm"><inertial><mass value="2.0"/><origin xyz="0 0 0.2"/>
+        <inertia ixx="{ax}" iyy="{ay}" izz="{az}" ixy="0" ixz="0" iyz="0"/></inertial></link>
+      <link name="camera"><inertial><mass value="0.01"/>
+        <inertia ixx="{ixx}" iyy="{iyy}" izz="{izz}" ixy="0" ixz="0" iyz="0"/></inertial></link>
+      <joint name="shoulder" type="revolute"><parent link="base"/><child link="arm"/>
+        <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+      <joint name="mount" type="fixed"><parent link="arm"/><child link="camera"/>
+        <origin xyz="0 0.1 0.3"/></joint>
+    </robot>"""
+
+
+def test_a_welded_part_judged_by_its_rigid_unit():
+    """ANYmal C's depth cameras break the triangle inequality by half their largest moment:
+    what moves is the link they are welded to, whose combined inertia is physical; the
+    camera's own inertia is accepted with a warning naming it, and refused by strict."""
+    from gagen.model.urdf import parse_urdf_text
+
+    text = _welded_sensor_urdf((1e-6, 1e-5, 3e-5))
+    with pytest.warns(InertiaWarning) as record:
+        model = parse_urdf_text(text, "welded.urdf")
+    (message,) = inertia_warnings(record)
+    assert "link 'camera', inertial inertia" in message and "rigid unit of link 'arm'" in message
+    assert model.dof == 1
+    with pytest.raises(ModelError, match=r"welded\.urdf: link 'camera'.*strict=True"):
+        parse_urdf_text(text, "welded.urdf", strict=True)
+
+
+def test_a_rigid_unit_that_is_not_physical_is_refused_with_its_parts_named():
+    from gagen.model.urdf import parse_urdf_text
+
+    text = _welded_sensor_urdf((1, 1, 1), arm_moments=(1, 1, 3))
+    with pytest.raises(ModelError, match=r"link 'arm' \(with 1 welded link\), inertial "
+                       r"inertia: .*triangle inequality.*Fix the inertia"):
+        parse_urdf_text(text, "welded.urdf")
+
+
+def test_parts_welded_to_the_world_do_not_move_and_are_not_checked():
+    """ANYmal C on a fixed base: its cameras and hatch are welded to the base, which is
+    welded to the world; they load silently."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", InertiaWarning)
+        model = resolve_model(Path(ALLEGRO).parent / "anymal_c.urdf")
+    assert model.dof == 12

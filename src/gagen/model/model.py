@@ -7,6 +7,8 @@ or slides along (prismatic) its axis, given in the joint frame.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import hashlib
 import math
 import warnings
@@ -274,9 +276,12 @@ def _validate(model: Model) -> None:
         mass = _numeric(b.mass, values, src, f"{where}, mass")
         if mass < 0 or not math.isfinite(mass):
             raise ModelError(src, f"{where}, mass", f"mass must be non-negative, got {mass:g}")
-        # The reader of the file warned about (or refused) a borderline inertia once.
-        check_inertia(_inertia_value(b, values, src), src, f"{where}, inertia",
-                      borderline="accept")
+        check_tensor(_inertia_value(b, values, src), src, f"{where}, inertia")
+    # The reader of the file warned about (or refused) a borderline inertia once; what is
+    # physical or not is the inertia of each rigid unit (a moving body and the bodies
+    # welded to it), which is what enters the equations.
+    for unit in rigid_units(model, values):
+        check_inertia(unit.inertia, src, unit.element(*_NAMING.get()), borderline="accept")
 
 
 def _inertia_value(body: Body, values: dict[sp.Symbol, float], source: str) -> np.ndarray:
@@ -285,14 +290,118 @@ def _inertia_value(body: Body, values: dict[sp.Symbol, float], source: str) -> n
                      for row in body.inertia.tolist()])
 
 
-def check_model_inertias(model: Model, strict: bool = False) -> None:
-    """`check_inertia` on every body of a Model at its default parameters: a borderline
-    inertia warns, or is refused when `strict` (for model files and Model objects, whose
-    construction accepts it silently)."""
+def check_model_inertias(model: Model, strict: bool = False, noun: str = "body",
+                         field: str = "inertia") -> None:
+    """Check a Model's inertias at its default parameters, as the readers of files do.
+
+    What must be physical is each rigid unit: a moving body together with the bodies welded
+    to it by fixed joints (a sensor or a flange on a link), since that combined inertia is
+    what the equations contain; bodies welded to the world do not move and are not
+    checked. A borderline unit warns (`InertiaWarning`), or is refused when `strict`; a
+    grossly non-physical one is refused. A welded part whose own inertia is off while its
+    unit's is physical (CAD exports give sensor links such inertias: ANYmal C's depth
+    cameras, Tiago's antennas) is accepted with a warning naming it, or refused when
+    `strict`. Errors and warnings name each body as the file does (`noun`, `field`: a URDF
+    says "link 'x', inertial inertia")."""
     values = {sp.Symbol(k): sp.Float(float(v)) for k, v in model.parameters.items()}
+    for unit in rigid_units(model, values):
+        check_inertia(unit.inertia, model.source, unit.element(noun, field), strict=strict)
+        if not unit.parts:
+            continue  # the unit is its body: checked just now
+        for name, inertia in unit.members:
+            defect, _ = _inertia_defect(np.linalg.eigvalsh(inertia))
+            if defect is None:
+                continue
+            element = f"{noun} '{name}', {field}"
+            unit_text = f"the rigid unit of {noun} '{unit.body}' and the {noun}s welded to it"
+            if strict:
+                raise ModelError(model.source, element, f"{defect}; refused because "
+                                 f"strict=True ({unit_text} has a physical combined inertia: "
+                                 "load with strict=False to accept it with a warning)")
+            warnings.warn(one_line(f"{model.source}: {element}: {defect}; accepted: "
+                                   f"{unit_text} has a physical combined inertia, which is "
+                                   "what moves (strict=True refuses it)"),
+                          InertiaWarning, stacklevel=2)
+
+
+# How errors about bodies name them: a URDF reader says "link 'x', inertial inertia"
+# while it builds its Model (`naming`).
+_NAMING: contextvars.ContextVar[tuple[str, str]] = contextvars.ContextVar(
+    "gagen_body_naming", default=("body", "inertia"))
+
+
+@contextlib.contextmanager
+def naming(noun: str, field: str):
+    """Within the block, Models name their bodies' inertias as `<noun> 'x', <field>`."""
+    token = _NAMING.set((noun, field))
+    try:
+        yield
+    finally:
+        _NAMING.reset(token)
+
+
+@dataclass(frozen=True)
+class RigidUnit:
+    """A moving body and the bodies welded to it: their combined central inertia (in the
+    moving body's axes) and, for each welded part, its own central inertia."""
+
+    body: str
+    inertia: np.ndarray
+    parts: tuple[tuple[str, np.ndarray], ...]
+    own: np.ndarray  # the moving body's own central inertia
+
+    @property
+    def members(self) -> tuple[tuple[str, np.ndarray], ...]:
+        """Every body of the unit with its own central inertia, the moving one first."""
+        return ((self.body, self.own), *self.parts)
+
+    def element(self, noun: str = "body", field: str = "inertia") -> str:
+        """How an error names the unit: `body 'x' (with 2 welded bodies), inertia`."""
+        count = len(self.parts)
+        plural = {"body": "bodies"}.get(noun, noun + "s") if count != 1 else noun
+        welded = f" (with {count} welded {plural})" if count else ""
+        return f"{noun} '{self.body}'{welded}, {field}"
+
+
+def rigid_units(model: Model, values: dict[sp.Symbol, float]) -> list[RigidUnit]:
+    """The rigid units of a model (numerically, at `values`): each moving body with the
+    bodies welded to it through fixed joints."""
+    frames: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}  # body -> (unit, R, d)
+    members: dict[str, list[tuple[Body, np.ndarray, np.ndarray]]] = {}
     for b in model.bodies:
-        check_inertia(_inertia_value(b, values, model.source), model.source,
-                      f"body '{b.name}', inertia", strict=strict)
+        if b.joint.moves:
+            frames[b.name] = (b.name, np.eye(3), np.zeros(3))
+            members[b.name] = [(b, np.eye(3), np.zeros(3))]
+        elif b.parent in frames:
+            unit, R, d = frames[b.parent]
+            R0 = _numeric_matrix(b.joint.origin_rotation, values, model.source,
+                                 f"body '{b.name}', origin rotation")
+            d0 = _numeric_matrix(b.joint.origin_xyz, values, model.source,
+                                 f"body '{b.name}', joint origin xyz").ravel()
+            frames[b.name] = (unit, R @ R0, d + R @ d0)
+            members[unit].append((b, R @ R0, d + R @ d0))
+    units = []
+    for name, parts in members.items():
+        mass, first, inertia, own = 0.0, np.zeros(3), np.zeros((3, 3)), []
+        for b, R, d in parts:
+            where = f"body '{b.name}'"
+            m = _numeric(b.mass, values, model.source, f"{where}, mass")
+            c = d + R @ _numeric_matrix(b.com, values, model.source, f"{where}, com").ravel()
+            I_c = R @ _inertia_value(b, values, model.source) @ R.T
+            mass, first = mass + m, first + m * c
+            inertia += I_c + m * (c @ c * np.eye(3) - np.outer(c, c))
+            if b.name != name:
+                own.append((b.name, _inertia_value(b, values, model.source)))
+        centre = first / mass if mass > 0 else np.zeros(3)
+        central = inertia - mass * (centre @ centre * np.eye(3) - np.outer(centre, centre))
+        units.append(RigidUnit(name, (central + central.T) / 2, tuple(own),
+                               _inertia_value(parts[0][0], values, model.source)))
+    return units
+
+
+def _numeric_matrix(matrix, values, source: str, element: str) -> np.ndarray:
+    return np.array([[_numeric(e, values, source, element) for e in row]
+                     for row in sp.Matrix(matrix).tolist()])
 
 
 # Real CAD exports round their inertias, and some are hand-tuned: the Allegro hand of
@@ -324,10 +433,7 @@ def check_inertia(inertia: np.ndarray, source: str, element: str, strict: bool =
     mode = borderline or ("refuse" if strict else "warn")
     if mode not in BORDERLINE:
         raise ValueError(f"borderline must be one of {', '.join(BORDERLINE)}, got {mode!r}")
-    if not np.all(np.isfinite(inertia)):
-        raise ModelError(source, element, "inertia has non-finite entries")
-    if not np.allclose(inertia, inertia.T, rtol=0, atol=1e-12 * max(1.0, np.abs(inertia).max())):
-        raise ModelError(source, element, "inertia tensor is not symmetric")
+    check_tensor(inertia, source, element)
     defect, tolerance = _inertia_defect(np.linalg.eigvalsh(inertia))
     if defect is None:
         return
@@ -345,6 +451,14 @@ def check_inertia(inertia: np.ndarray, source: str, element: str, strict: bool =
         warnings.warn(one_line(f"{source}: {element}: {defect}; within what gagen accepts "
                                f"from CAD exports ({tolerance}), loaded anyway (strict=True "
                                "refuses it)"), InertiaWarning, stacklevel=2)
+
+
+def check_tensor(inertia: np.ndarray, source: str, element: str) -> None:
+    """An inertia tensor at all: finite and symmetric (physical or not is another check)."""
+    if not np.all(np.isfinite(inertia)):
+        raise ModelError(source, element, "inertia has non-finite entries")
+    if not np.allclose(inertia, inertia.T, rtol=0, atol=1e-12 * max(1.0, np.abs(inertia).max())):
+        raise ModelError(source, element, "inertia tensor is not symmetric")
 
 
 def _inertia_defect(eig: np.ndarray) -> tuple[str | None, str]:

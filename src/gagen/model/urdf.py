@@ -29,13 +29,16 @@ from .model import (
     Limits,
     Model,
     ModelError,
-    check_inertia,
+    check_model_inertias,
+    check_tensor,
+    naming,
     rotation_from_rpy,
     vector,
 )
 from .parameters import parameterize_mass_properties
 
 GRAVITY = 9.81
+_LINK_INERTIA = ("link", "inertial inertia")  # how messages name a link's inertia
 _UNSUPPORTED = ("floating", "planar")
 _INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 
@@ -69,7 +72,7 @@ def parse_urdf_text(text: str | bytes, source: str = "<urdf>", strict: bool = Fa
     Bytes are decoded as their XML declaration says (UTF-8 when there is none).
     """
     robot = _parse_xml(text, source)
-    links = _parse_links(robot, source, strict)
+    links = _parse_links(robot, source)
     joints = _parse_joints(robot, links, source)
     root, ordered = _tree_order(links, joints, source)
     if not any(j.joint.moves for j in ordered):
@@ -77,8 +80,10 @@ def parse_urdf_text(text: str | bytes, source: str = "<urdf>", strict: bool = Fa
                          "no revolute, continuous or prismatic joint: nothing can move")
     bodies = tuple(_body(j, links[j.child], root) for j in ordered)
     g = sp.Symbol("g")
-    model = Model(name=_robot_name(robot, source), bodies=bodies,
-                  parameters={"g": GRAVITY}, gravity=vector([0, 0, -g]), source=source)
+    with naming(*_LINK_INERTIA):  # before merging: a message names the link, welded or not
+        model = Model(name=_robot_name(robot, source), bodies=bodies,
+                      parameters={"g": GRAVITY}, gravity=vector([0, 0, -g]), source=source)
+    check_model_inertias(model, strict, *_LINK_INERTIA)
     return parameterize_mass_properties(merge_fixed_joints(model))
 
 
@@ -149,7 +154,7 @@ def _origin(parent: ET.Element, source: str, element: str) -> tuple[list, list]:
 
 # --- links ----------------------------------------------------------------------------------
 
-def _parse_links(robot: ET.Element, source: str, strict: bool) -> dict[str, _Link]:
+def _parse_links(robot: ET.Element, source: str) -> dict[str, _Link]:
     links: dict[str, _Link] = {}
     elements = robot.findall("link")
     check_body_count(len(elements), source, "<robot>")
@@ -157,13 +162,13 @@ def _parse_links(robot: ET.Element, source: str, strict: bool) -> dict[str, _Lin
         name = _name_attr(elem, "name", source, f"link #{k + 1}")
         if name in links:
             raise ModelError(source, f"link {quote(name)}", "duplicate link name")
-        links[name] = _parse_link(elem, name, source, strict)
+        links[name] = _parse_link(elem, name, source)
     if not links:
         raise ModelError(source, "<robot>", "no <link> elements")
     return links
 
 
-def _parse_link(elem: ET.Element, name: str, source: str, strict: bool) -> _Link:
+def _parse_link(elem: ET.Element, name: str, source: str) -> _Link:
     where = f"link {quote(name)}, inertial"
     inertial = elem.find("inertial")
     if inertial is None:  # URDF: a link without <inertial> has no mass
@@ -179,7 +184,7 @@ def _parse_link(elem: ET.Element, name: str, source: str, strict: bool) -> _Link
     tensor = sp.Matrix([[values["ixx"], values["ixy"], values["ixz"]],
                         [values["ixy"], values["iyy"], values["iyz"]],
                         [values["ixz"], values["iyz"], values["izz"]]])
-    check_inertia(np.array(tensor.tolist(), dtype=float), source, f"{where} inertia", strict)
+    check_tensor(np.array(tensor.tolist(), dtype=float), source, f"{where} inertia")
     # URDF gives the inertia in the inertial frame; gagen wants it along the body's axes.
     if any(a != 0 for a in rpy):
         rot = rotation_from_rpy(*rpy)
