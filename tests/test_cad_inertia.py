@@ -210,7 +210,7 @@ def test_a_welded_part_judged_by_its_rigid_unit():
 def test_a_rigid_unit_that_is_not_physical_is_refused_with_its_parts_named():
     from gagen.model.urdf import parse_urdf_text
 
-    text = _welded_sensor_urdf((1, 1, 1), arm_moments=(1, 1, 3))
+    text = _welded_sensor_urdf((1e-6, 1e-6, 1e-6), arm_moments=(1, 1, 3))
     with pytest.raises(ModelError, match=r"link 'arm' \(with 1 welded link\), inertial "
                        r"inertia: .*triangle inequality.*Fix the inertia"):
         parse_urdf_text(text, "welded.urdf")
