@@ -14,6 +14,25 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 
+# per second: how fast the rate of a floating joint's quaternion pulls it back onto the unit
+# sphere in simulations (gagen.runtime.manifold.configuration_rate; the compiled integrators
+# print this number)
+QUATERNION_RESTORING = 1.0
+
+# the suffixes of a floating joint's configuration entries and velocity coordinates
+# (gagen.model.model.FLOATING_CONFIGURATION / FLOATING_VELOCITY, repeated here because the
+# runtime does not import the model stage)
+CONFIGURATION = ("x", "y", "z", "qx", "qy", "qz", "qw")
+VELOCITY = ("vx", "vy", "vz", "wx", "wy", "wz")
+
+
+def joint_names(joint: JointInfo, suffixes: tuple[str, ...]) -> list[str]:
+    """A joint's entry names: its own name, or for a floating joint one per suffix."""
+    if joint.type == "floating":
+        return [f"{joint.name}_{suffix}" for suffix in suffixes]
+    return [joint.name]
+
+
 @dataclass(frozen=True)
 class JointInfo:
     """A moving joint: its coordinate's name, type and limits (None where not given)."""
@@ -37,11 +56,32 @@ class ModelInfo:
 
     @property
     def coordinates(self) -> list[str]:
-        return [joint.name for joint in self.joints]
+        """The velocity coordinates' names (a floating joint's six: `<joint>_vx` ...)."""
+        return [name for joint in self.joints for name in joint_names(joint, VELOCITY)]
+
+    @property
+    def configuration(self) -> list[str]:
+        """The configuration entries' names, in the order of q (`<joint>_x` ... `_qw`)."""
+        return [name for joint in self.joints for name in joint_names(joint, CONFIGURATION)]
 
     @property
     def dof(self) -> int:
-        return len(self.joints)
+        """The number of velocity coordinates (nv)."""
+        return len(self.coordinates)
+
+    @property
+    def nq(self) -> int:
+        return len(self.configuration)
+
+    def floating_joints(self) -> list[tuple[int, int]]:
+        """(first entry in q, first coordinate in qd) of each floating joint."""
+        out, iq, iv = [], 0, 0
+        for joint in self.joints:
+            if joint.type == "floating":
+                out.append((iq, iv))
+            iq += len(joint_names(joint, CONFIGURATION))
+            iv += len(joint_names(joint, VELOCITY))
+        return out
 
     @property
     def parameter_defaults(self) -> dict[str, float]:

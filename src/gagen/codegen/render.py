@@ -19,7 +19,7 @@ from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE, precedence
 
 from .. import __version__
-from ..manifest import ModelInfo
+from ..manifest import QUATERNION_RESTORING, ModelInfo
 from ..symbolic.gibbs_appell import Equations
 from .config import INLINE_STAGE_OPS, CodegenConfig  # noqa: F401 (re-exported)
 from .cse import CSEResult, operation_count
@@ -422,8 +422,16 @@ def generate(eqs: Equations, module_name: str, key: str,
         "IDENT": ident.upper(),
         "n": n,
         "np": len(eqs.parameters),
+        "nq": eqs.nq,
         # user names reach the sources only as identifiers (comments of the header)
         "coordinates": [c_identifier(c) for c in model.coordinates],
+        "configuration": [c_identifier(c) for c in model.configuration],
+        # where each floating joint starts in q and qd, and the entry of q of each
+        # velocity coordinate that is a plain number (-1: a floating joint's)
+        "floating": [start for body, start in model.indices().items()
+                     if model.body(body).joint.floating],
+        "q_of_v": _configuration_entries(model),
+        "quaternion_restoring": repr(float(QUATERNION_RESTORING)),
         "parameters": [(c_identifier(k), repr(float(v))) for k, v in model.parameters.items()],
         "lower": lower,
         "ldlt": ldlt_plan(n, zero),
@@ -453,6 +461,15 @@ def generate(eqs: Equations, module_name: str, key: str,
         files[name] = f"/* {context['header']} (copied from gagen's templates) */\n" + text
     return GeneratedCode(files=files, ops_before=cse.ops_before, ops_after=cse.ops_after,
                          cse_seconds=cse.seconds, module_name=module_name, ident=ident)
+
+
+def _configuration_entries(model) -> list[int]:
+    """For each velocity coordinate, its entry in q, or -1 for a floating joint's."""
+    out = []
+    for body, (iq, iv) in model.indices().items():
+        joint = model.body(body).joint
+        out += [-1] * 6 if joint.floating else [iq]
+    return out
 
 
 def c_sources(files) -> list[str]:

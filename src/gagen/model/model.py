@@ -19,7 +19,14 @@ import sympy as sp
 
 from ..errors import InertiaWarning, ModelError, one_line
 
-JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
+JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating")
+# A floating joint (Pinocchio's FreeFlyer) has 7 configuration entries, the position of its
+# body's origin in the world and its orientation as a unit quaternion (x, y, z, w), and 6
+# velocity coordinates, the velocity of the origin and the angular velocity, both in the
+# body's frame; its generalised force is the wrench (force, moment about the origin) on the
+# body, in the body's frame. Their names are the joint's with these suffixes.
+FLOATING_CONFIGURATION = ("x", "y", "z", "qx", "qy", "qz", "qw")
+FLOATING_VELOCITY = ("vx", "vy", "vz", "wx", "wy", "wz")
 WORLD = "world"
 
 
@@ -112,6 +119,32 @@ class Joint:
     def rotates(self) -> bool:
         return self.type in ("revolute", "continuous")
 
+    @property
+    def floating(self) -> bool:
+        return self.type == "floating"
+
+    @property
+    def nq(self) -> int:
+        """Configuration entries: 7 for a floating joint, 1 for a moving one, else 0."""
+        return 7 if self.floating else int(self.moves)
+
+    @property
+    def nv(self) -> int:
+        """Velocity coordinates: 6 for a floating joint, 1 for a moving one, else 0."""
+        return 6 if self.floating else int(self.moves)
+
+    @property
+    def configuration_names(self) -> list[str]:
+        if self.floating:
+            return [f"{self.name}_{suffix}" for suffix in FLOATING_CONFIGURATION]
+        return [self.name] if self.moves else []
+
+    @property
+    def velocity_names(self) -> list[str]:
+        if self.floating:
+            return [f"{self.name}_{suffix}" for suffix in FLOATING_VELOCITY]
+        return [self.name] if self.moves else []
+
 
 @dataclass(frozen=True)
 class Body:
@@ -147,11 +180,49 @@ class Model:
 
     @property
     def coordinates(self) -> list[str]:
-        return [b.joint.name for b in self.moving_bodies]
+        """The names of the velocity coordinates, in the order of qd, qdd and tau (a
+        floating joint's six first among its own: linear, then angular)."""
+        return [name for b in self.moving_bodies for name in b.joint.velocity_names]
+
+    @property
+    def configuration(self) -> list[str]:
+        """The names of the configuration entries, in the order of q (a floating joint's
+        position, then its quaternion x, y, z, w)."""
+        return [name for b in self.moving_bodies for name in b.joint.configuration_names]
 
     @property
     def dof(self) -> int:
-        return len(self.moving_bodies)
+        """The number of velocity coordinates (nv)."""
+        return sum(b.joint.nv for b in self.moving_bodies)
+
+    @property
+    def nv(self) -> int:
+        return self.dof
+
+    @property
+    def nq(self) -> int:
+        """The number of configuration entries (nv plus one per floating joint)."""
+        return sum(b.joint.nq for b in self.moving_bodies)
+
+    @property
+    def floating(self) -> bool:
+        """Whether some body moves freely (a floating joint)."""
+        return any(b.joint.floating for b in self.bodies)
+
+    def body(self, name: str) -> Body:
+        """The body called `name`."""
+        for b in self.bodies:
+            if b.name == name:
+                return b
+        raise KeyError(name)
+
+    def indices(self) -> dict[str, tuple[int, int]]:
+        """For each moving body, where its joint starts in q and in qd: (iq, iv)."""
+        out, iq, iv = {}, 0, 0
+        for b in self.moving_bodies:
+            out[b.name] = (iq, iv)
+            iq, iv = iq + b.joint.nq, iv + b.joint.nv
+        return out
 
     @property
     def symbols(self) -> dict[str, sp.Symbol]:
@@ -262,11 +333,16 @@ def _validate(model: Model) -> None:
                             ("axis", j.axis), ("mass", b.mass), ("com", b.com),
                             ("inertia", b.inertia)):
             check_symbols(expr, f"{where}, {label}")
-        if j.moves:
-            if j.name in coords:
+        if j.floating and b.parent != WORLD:
+            raise ModelError(src, f"{where}, joint '{j.name}'", "a floating joint must attach "
+                             f"its body to '{WORLD}' (its parent is '{b.parent}')")
+        for name in dict.fromkeys(j.configuration_names + j.velocity_names):
+            if name in coords:
                 raise ModelError(src, f"{where}, joint '{j.name}'",
-                                 f"duplicate coordinate name (also used by body '{coords[j.name]}')")
-            coords[j.name] = b.name
+                                 f"duplicate coordinate name '{name}' (also used by body "
+                                 f"'{coords[name]}')")
+            coords[name] = b.name
+        if j.moves and not j.floating:
             axis = np.array([_numeric(a, values, src, f"{where}, axis") for a in j.axis])
             if not np.linalg.norm(axis) > 1e-12:
                 raise ModelError(src, f"{where}, joint '{j.name}'", "zero joint axis")

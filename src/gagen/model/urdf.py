@@ -39,7 +39,10 @@ from .parameters import parameterize_mass_properties
 
 GRAVITY = 9.81
 _LINK_INERTIA = ("link", "inertial inertia")  # how messages name a link's inertia
-_UNSUPPORTED = ("floating", "planar")
+_UNSUPPORTED = ("planar",)
+# The name of the floating joint that floating_base=True puts between the world and the
+# root link (Pinocchio's name for it)
+ROOT_JOINT = "root_joint"
 _INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 
 
@@ -58,33 +61,51 @@ class _UrdfJoint:
     joint: Joint
 
 
-def load_urdf(path: str | Path, strict: bool = False) -> Model:
+def load_urdf(path: str | Path, strict: bool = False, floating_base: bool = False) -> Model:
     """Read a URDF file; errors are ModelError naming the file, the element and the reason.
 
     An inertia slightly off physical (CAD round-off) loads with a
-    `gagen.errors.InertiaWarning`, or is refused when `strict`."""
-    return parse_urdf_text(read_description(path, "URDF file"), str(path), strict)
+    `gagen.errors.InertiaWarning`, or is refused when `strict`. With `floating_base`, the
+    root link moves freely: a floating joint `root_joint` joins it to the world (as
+    Pinocchio's `buildModelFromUrdf(path, JointModelFreeFlyer())` does)."""
+    return parse_urdf_text(read_description(path, "URDF file"), str(path), strict,
+                           floating_base)
 
 
-def parse_urdf_text(text: str | bytes, source: str = "<urdf>", strict: bool = False) -> Model:
+def parse_urdf_text(text: str | bytes, source: str = "<urdf>", strict: bool = False,
+                    floating_base: bool = False) -> Model:
     """Build the Model of a URDF document given as text or bytes; source names it in errors.
 
-    Bytes are decoded as their XML declaration says (UTF-8 when there is none).
+    Bytes are decoded as their XML declaration says (UTF-8 when there is none). The root
+    link is welded to the world, or with `floating_base` attached to it by a floating joint.
     """
     robot = _parse_xml(text, source)
     links = _parse_links(robot, source)
     joints = _parse_joints(robot, links, source)
     root, ordered = _tree_order(links, joints, source)
-    if not any(j.joint.moves for j in ordered):
+    bodies = [_body(j, links[j.child], None if floating_base else root, source)
+              for j in ordered]
+    if floating_base:
+        if any(j.joint.floating for j in ordered):
+            raise ModelError(source, f"link {quote(root)}", "floating_base=True adds a floating "
+                             "joint to the root link, but the URDF has a floating joint already")
+        bodies.insert(0, _root_body(links[root]))
+    if not any(b.joint.moves for b in bodies):
         raise ModelError(source, f"robot {quote(_robot_name(robot, source))}",
-                         "no revolute, continuous or prismatic joint: nothing can move")
-    bodies = tuple(_body(j, links[j.child], root) for j in ordered)
+                         "no revolute, continuous, prismatic or floating joint: nothing can "
+                         "move (floating_base=True lets the root link move freely)")
     g = sp.Symbol("g")
     with naming(*_LINK_INERTIA):  # before merging: a message names the link, welded or not
-        model = Model(name=_robot_name(robot, source), bodies=bodies,
+        model = Model(name=_robot_name(robot, source), bodies=tuple(bodies),
                       parameters={"g": GRAVITY}, gravity=vector([0, 0, -g]), source=source)
     check_model_inertias(model, strict, *_LINK_INERTIA)
     return parameterize_mass_properties(merge_fixed_joints(model))
+
+
+def _root_body(link: _Link) -> Body:
+    """The root link on a floating joint to the world (floating_base=True)."""
+    return Body(name=link.name, parent=WORLD, joint=Joint(name=ROOT_JOINT, type="floating"),
+                mass=link.mass, com=link.com, inertia=link.inertia)
 
 
 # --- XML structure --------------------------------------------------------------------------
@@ -241,7 +262,7 @@ def _axis(elem: ET.Element, jtype: str, source: str, where: str) -> sp.Immutable
     axis_elem = elem.find("axis")
     text = axis_elem.get("xyz", "1 0 0") if axis_elem is not None else "1 0 0"
     axis = _numbers(text, 3, source, f"{where}, axis")
-    if jtype == "fixed":
+    if jtype in ("fixed", "floating"):
         return vector(axis)
     norm = math.sqrt(sum(float(a) ** 2 for a in axis))
     if norm < 1e-12:
@@ -315,8 +336,12 @@ def _tree_order(links: dict[str, _Link], joints: list[_UrdfJoint],
     return root, ordered
 
 
-def _body(j: _UrdfJoint, link: _Link, root: str) -> Body:
-    # The root link is welded to the world, so the world takes its place.
+def _body(j: _UrdfJoint, link: _Link, root: str | None, source: str) -> Body:
+    # A root link welded to the world is the world (root None: the root link is a body).
     parent = WORLD if j.parent == root else j.parent
+    if j.joint.floating and parent != WORLD:
+        raise ModelError(source, f"joint {quote(j.joint.name)}", "a floating joint must join "
+                         "a link to the root link (the world): gagen's floating joints are "
+                         "free bases")
     return Body(name=link.name, parent=parent, joint=j.joint, mass=link.mass, com=link.com,
                 inertia=link.inertia)

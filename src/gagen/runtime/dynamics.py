@@ -39,8 +39,18 @@ class Dynamics:
 
     @property
     def coordinates(self) -> list[str]:
-        """The coordinates' names (the moving joints), in the order of q."""
+        """The velocity coordinates' names, in the order of qd, qdd and tau (and of q, when
+        no joint floats): the moving joints; a floating joint's six first among its own,
+        `<joint>_vx, _vy, _vz` (its origin's velocity) and `_wx, _wy, _wz` (its angular
+        velocity), both in its body's frame."""
         return list(self._coordinates)
+
+    @property
+    def configuration(self) -> list[str]:
+        """The names of q's entries: the coordinates, except that a floating joint has
+        seven, `<joint>_x, _y, _z` (its origin in the world) and `_qx, _qy, _qz, _qw` (its
+        orientation as a unit quaternion, Pinocchio's FreeFlyer order)."""
+        return list(self.info.configuration)
 
     @property
     def parameters(self) -> dict[str, float]:
@@ -49,8 +59,23 @@ class Dynamics:
 
     @property
     def n(self) -> int:
-        """The number of coordinates."""
+        """The number of velocity coordinates (nv)."""
         return len(self._coordinates)
+
+    @property
+    def nv(self) -> int:
+        """The number of velocity coordinates: the size of qd, qdd, tau; M is nv x nv."""
+        return len(self._coordinates)
+
+    @property
+    def nq(self) -> int:
+        """The size of q: nv, plus one per floating joint (a quaternion for 3 rotations)."""
+        return self._sizes[0]
+
+    @cached_property
+    def _sizes(self) -> tuple[int, int, int]:
+        """(nq, nv, nv): the sizes of a call's three state arguments."""
+        return (self.info.nq, self.nv, self.nv)
 
     @cached_property
     def _coordinates(self) -> tuple[str, ...]:
@@ -71,6 +96,29 @@ class Dynamics:
     def __repr__(self) -> str:
         return (f"<gagen dynamics '{self.info.name}' backend={self.backend} "
                 f"coordinates={self.coordinates}>")
+
+    # --- the configuration space -----------------------------------------------------------
+
+    def integrate(self, q, v, dt=1.0) -> np.ndarray:
+        """q ⊕ v·dt, as Pinocchio's `integrate(model, q, v * dt)`: a floating joint moves
+        along the twist v (its origin's velocity and its angular velocity, in its body's
+        frame) held for dt, every other coordinate by v·dt. Shapes (nq,), (nv,) or stacked."""
+        from .manifold import integrate
+
+        return integrate(self.info, q, v, dt)
+
+    def difference(self, q0, q1) -> np.ndarray:
+        """The velocity v, shape (nv,), with `integrate(q0, v) == q1` (Pinocchio's
+        `difference`); stacked inputs give stacked outputs."""
+        from .manifold import difference
+
+        return difference(self.info, q0, q1)
+
+    def neutral(self) -> np.ndarray:
+        """The configuration with every coordinate 0 and every quaternion the identity."""
+        from .manifold import neutral
+
+        return neutral(self.info)
 
     # --- the dynamics (each backend implements these) --------------------------------------
 

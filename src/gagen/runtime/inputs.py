@@ -19,11 +19,14 @@ def as_float_array(a, name: str) -> np.ndarray:
     return arr.astype(float, copy=False)
 
 
-def as_states(n: int, *arrays, names: tuple[str, ...]) -> tuple[list[np.ndarray], bool]:
-    """Check and convert inputs of shape (n,) or stacked (N, n); say whether they were stacked."""
+def as_states(n, *arrays, names: tuple[str, ...]) -> tuple[list[np.ndarray], bool]:
+    """Check and convert inputs of shape (n,) or stacked (N, n); say whether they were stacked.
+
+    `n` is one size for every array, or a size per array (q has nq entries, qd nv)."""
+    sizes = tuple(n) if isinstance(n, (tuple, list)) else (n,) * len(arrays)
     out = []
     stacked_shape = None
-    for name, a in zip(names, arrays):
+    for name, a, n in zip(names, arrays, sizes):
         arr = as_float_array(a, name)
         if arr.ndim == 1 and arr.shape[0] == n:
             pass
@@ -36,7 +39,8 @@ def as_states(n: int, *arrays, names: tuple[str, ...]) -> tuple[list[np.ndarray]
         out.append(arr)
     stacked = stacked_shape is not None
     if stacked:
-        out = [np.broadcast_to(a, (stacked_shape, n)) if a.ndim == 1 else a for a in out]
+        out = [np.broadcast_to(a, (stacked_shape, a.shape[0])) if a.ndim == 1 else a
+               for a in out]
     return out, stacked
 
 

@@ -71,7 +71,7 @@ class LambdifyDynamics(Dynamics):
         return np.array(values, dtype=float)
 
     def mass_matrix(self, q, p=None) -> np.ndarray:
-        (q,), stacked = as_states(self.n, q, names=("q",))
+        (q,), stacked = as_states(self.nq, q, names=("q",))
         lower = self._call(self._mass, [q], p, stacked)
         M = np.zeros(lower.shape[:-1] + (self.n, self.n))
         M[..., self._lower[0], self._lower[1]] = lower
@@ -79,7 +79,7 @@ class LambdifyDynamics(Dynamics):
         return M
 
     def forcing(self, q, qd, tau, p=None) -> np.ndarray:
-        states, stacked = as_states(self.n, q, qd, tau, names=("q", "qd", "tau"))
+        states, stacked = as_states(self._sizes, q, qd, tau, names=("q", "qd", "tau"))
         return self._call(self._forcing, states, p, stacked)
 
     def forward_dynamics(self, q, qd, tau, p=None) -> np.ndarray:
@@ -87,16 +87,16 @@ class LambdifyDynamics(Dynamics):
         return _cholesky_solve(L, self.forcing(q, qd, tau, p)[..., None])[..., 0]
 
     def inverse_dynamics(self, q, qd, qdd, p=None) -> np.ndarray:
-        states, stacked = as_states(self.n, q, qd, qdd, names=("q", "qd", "qdd"))
+        states, stacked = as_states(self._sizes, q, qd, qdd, names=("q", "qd", "qdd"))
         return self._call(self._inverse, states, p, stacked)
 
     def gravity(self, q, p=None) -> np.ndarray:
         """The gravity torques g(q) = inverse_dynamics(q, 0, 0)."""
-        (q,), stacked = as_states(self.n, q, names=("q",))
+        (q,), stacked = as_states(self.nq, q, names=("q",))
         return self._call(self._gravity, [q], p, stacked)
 
     def energy(self, q, qd, p=None) -> tuple:
-        states, stacked = as_states(self.n, q, qd, names=("q", "qd"))
+        states, stacked = as_states(self._sizes, q, qd, names=("q", "qd"))
         values = self._call(self._energy, states, p, stacked)
         if stacked:
             return values[:, 0].copy(), values[:, 1].copy()
@@ -121,19 +121,19 @@ class LambdifyDynamics(Dynamics):
                 for name, exprs in d.outputs().items()}
 
     def inverse_dynamics_derivatives(self, q, qd, qdd, p=None) -> tuple:
-        states, stacked = as_states(self.n, q, qd, qdd, names=("q", "qd", "qdd"))
+        states, stacked = as_states(self._sizes, q, qd, qdd, names=("q", "qd", "qdd"))
         fn = self._derivative_functions["inverse_dynamics_derivatives"]
         values = self._call(fn, states, p, stacked)
         both = values.reshape(values.shape[:-1] + (2, self.n, self.n))
         return both[..., 0, :, :].copy(), both[..., 1, :, :].copy()
 
     def coriolis_matrix(self, q, qd, p=None) -> np.ndarray:
-        states, stacked = as_states(self.n, q, qd, names=("q", "qd"))
+        states, stacked = as_states(self._sizes, q, qd, names=("q", "qd"))
         values = self._call(self._derivative_functions["coriolis_matrix"], states, p, stacked)
         return values.reshape(values.shape[:-1] + (self.n, self.n))
 
     def forward_dynamics_derivatives(self, q, qd, tau, p=None) -> tuple:
-        (q, qd, tau), _ = as_states(self.n, q, qd, tau, names=("q", "qd", "tau"))
+        (q, qd, tau), _ = as_states(self._sizes, q, qd, tau, names=("q", "qd", "tau"))
         p = self.parameter_vector(p)
         L = _cholesky(self.mass_matrix(q, p))
         qdd = _cholesky_solve(L, self.forcing(q, qd, tau, p)[..., None])[..., 0]

@@ -61,7 +61,7 @@ from .differentiate import needed_definitions as _needed
 from .differentiate import recorder_after
 from .gibbs_appell import Equations
 from .kinematics import CoordinateSymbols, Recorder
-from .recursive import Link, _links, _skew, _symmetric
+from .recursive import Link, _links, _skew, _symmetric, free_velocities
 
 Vec = sp.Matrix
 ZERO = sp.zeros(3, 1)
@@ -86,6 +86,38 @@ class Inertia:
     def times(self, w: Vec, v: Vec) -> tuple[Vec, Vec]:
         """I (w, v): the force (moment, force) of a motion."""
         return self.A * w + self.B * v, self.B.T * w + self.C * v
+
+    def matrix(self) -> sp.Matrix:
+        """The 6x6 matrix, angular rows and columns first."""
+        return sp.Matrix(sp.BlockMatrix([[self.A, self.B], [self.B.T, self.C]]))
+
+
+def _ldlt(A: sp.Matrix, rec: Recorder) -> tuple[sp.Matrix, list, list]:
+    """A = L D L^T of a small symmetric positive definite matrix, unrolled and named:
+    (unit lower L, the pivots D, their reciprocals)."""
+    n = A.shape[0]
+    L = sp.eye(n)
+    D: list = []
+    Dinv: list = []
+    for j in range(n):
+        D.append(rec.name(A[j, j] - sum(L[j, k] ** 2 * D[k] for k in range(j))))
+        Dinv.append(rec.name(1 / D[j]))
+        for i in range(j + 1, n):
+            L[i, j] = rec.name((A[i, j] - sum(L[i, k] * L[j, k] * D[k] for k in range(j)))
+                               * Dinv[j])
+    return L, D, Dinv
+
+
+def _ldlt_solve(L: sp.Matrix, Dinv: list, b: list, rec: Recorder) -> list:
+    """x with L D L^T x = b, named."""
+    n = len(b)
+    y: list = []
+    for i in range(n):
+        y.append(rec.name(b[i] - sum(L[i, k] * y[k] for k in range(i))))
+    x: list = [None] * n
+    for i in reversed(range(n)):
+        x[i] = rec.name(y[i] * Dinv[i] - sum(L[k, i] * x[k] for k in range(i + 1, n)))
+    return x
 
 
 @dataclass
@@ -157,12 +189,14 @@ def _program(model: Model, coords: CoordinateSymbols, rec: Recorder) -> AbaProgr
     links = _links(model, coords, rec)
     c, bias = _velocity_pass(links, coords, rec)
     U, D, Dinv, u = _articulated_pass(links, coords, rec, c, bias)
-    qdd = _acceleration_pass(links, rec, c, U, Dinv, u, -sp.Matrix(model.gravity), model.dof)
-    new = _needed(rec.definitions, qdd, first=given)
+    qdd = _acceleration_pass(links, coords, rec, c, U, Dinv, u, -sp.Matrix(model.gravity))
+    pivots = [p for i, link in enumerate(links) if link.k is not None
+              for p in (D[i] if link.free else [D[i]])]
+    new = _needed(rec.definitions, qdd + pivots, first=given)
     program = AbaProgram(model=model, coords=coords,
                          parameters=[sp.Symbol(k) for k in model.parameters],
                          intermediates=rec.definitions[:given] + new, qdd=qdd,
-                         pivots=[D[i] for i, link in enumerate(links) if link.k is not None])
+                         pivots=pivots)
     program.seconds = time.perf_counter() - start
     return program
 
@@ -200,7 +234,11 @@ def _velocity_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder):
             w_in, v_in = ZERO, ZERO
         else:
             w_in, v_in = _motion_to_child(link, *v[link.parent], rec)
-        s_w, s_v = _joint_motion(link, coords.qd[link.k] if link.k is not None else 0)
+        if link.free:  # the world is at rest: the joint's motion is the body's
+            v_lin, v_ang = free_velocities(link, coords.qd)
+            s_w, s_v = v_ang, v_lin
+        else:
+            s_w, s_v = _joint_motion(link, coords.qd[link.k] if link.k is not None else 0)
         w, vel = rec.vec(w_in + s_w), rec.vec(v_in + s_v)
         # v_i x (s qd) = (w x s_w, w x s_v + v x s_w); s x s = 0 lets w_in stand for w
         c.append((rec.vec(w_in.cross(s_w)), rec.vec(w_in.cross(s_v) + v_in.cross(s_w))))
@@ -225,6 +263,10 @@ def _articulated_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorde
         IA[i] = IA[i].named(rec)
         n_i, f_i = rec.vec(pA[i][0]), rec.vec(pA[i][1])
         Ia = IA[i]
+        if link.free:  # a floating root: its 6x6 articulated inertia, factorised
+            L, D[i], Dinv[i] = _ldlt(IA[i].matrix(), rec)
+            U[i], u[i] = (IA[i], L), (n_i, f_i)
+            continue
         if link.k is not None:
             U_n, U_f = IA[i].times(*_joint_motion(link, 1))
             U_n, U_f = rec.vec(U_n), rec.vec(U_f)
@@ -306,18 +348,27 @@ def _inertia_to_parent(link: Link, I: Inertia, rec: Recorder) -> Inertia:
     return Inertia(A, (B_r + Q).applyfunc(rec.name), C_r)
 
 
-def _acceleration_pass(links: list[Link], rec: Recorder, c: list, U: list, Dinv: list,
-                       u: list, base: Vec, dof: int) -> list[sp.Expr]:
+def _acceleration_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder, c: list,
+                       U: list, Dinv: list, u: list, base: Vec) -> list[sp.Expr]:
     """Spatial accelerations root to leaves, with each joint's qdd on the way."""
     acc: list[tuple[Vec, Vec]] = []
-    qdd: list[sp.Expr] = [sp.Integer(0)] * dof
+    qdd: list[sp.Expr] = [sp.Integer(0)] * len(coords.qd)
     for i, link in enumerate(links):
         if link.parent is None:
             alpha, a = ZERO, link.to_child(base, rec)
         else:
             alpha, a = _motion_to_child(link, *acc[link.parent], rec)
         alpha, a = rec.vec(alpha + c[i][0]), rec.vec(a + c[i][1])
-        if link.k is not None:
+        if link.free:
+            # I^A (a' + x) + p^A = tau: the joint's acceleration x = (dw/dt, dv/dt) of the
+            # body-frame components, Pinocchio's FreeFlyer acceleration
+            (IA, L), (n_A, f_A) = U[i], u[i]
+            tau_f, tau_n = free_velocities(link, coords.tau)
+            In, If = IA.times(alpha, a)
+            x = _ldlt_solve(L, Dinv[i], [*(tau_n - n_A - In), *(tau_f - f_A - If)], rec)
+            qdd[link.k: link.k + 6] = [*x[3:], *x[:3]]
+            alpha, a = rec.vec(alpha + sp.Matrix(x[:3])), rec.vec(a + sp.Matrix(x[3:]))
+        elif link.k is not None:
             U_n, U_f = U[i]
             qdd[link.k] = rec.name(Dinv[i] * (u[i] - U_n.dot(alpha) - U_f.dot(a)))
             s_w, s_v = _joint_motion(link, qdd[link.k])

@@ -59,6 +59,13 @@ class Equations:
 
     @property
     def n(self) -> int:
+        """The number of velocity coordinates (nv): the size of qd, qdd, tau and M."""
+        return len(self.coords.qd)
+
+    @property
+    def nq(self) -> int:
+        """The number of configuration entries: the size of q (n, plus one per floating
+        joint: its quaternion has four entries for three velocities)."""
         return len(self.coords.q)
 
     def substitutions(self) -> dict[sp.Symbol, sp.Expr]:
@@ -165,18 +172,27 @@ def joint_torque_forces(model: Model, kinematics: list[BodyKinematics],
     """
     n = model.dof
     by_name = {kin.body.name: kin for kin in kinematics}
+    index = model.indices()
     zero = sp.zeros(3, 1)
     Q = sp.zeros(n, 1)
-    for k, body in enumerate(model.moving_bodies):
+    for body in model.moving_bodies:
+        iq, k = index[body.name]
         child = by_name[body.name]
         parent = by_name.get(body.parent)
+        if body.joint.floating:
+            # the wrench (force at the origin, moment) on the body, in its frame; its
+            # reaction acts on the world, which does not move
+            force, moment = sp.Matrix(coords.tau[k: k + 3]), sp.Matrix(coords.tau[k + 3: k + 6])
+            for r in range(n):
+                Q[r] += child.Jv.get(r, zero).dot(force) + child.Jw.get(r, zero).dot(moment)
+            continue
         axis = unit_axis(body.joint.axis)
         R = sp.Matrix(body.joint.origin_rotation)
         d = sp.Matrix(body.joint.origin_xyz)
         if body.joint.rotates:
-            R = R * axis_rotation(axis, sp.cos(coords.q[k]), sp.sin(coords.q[k]))
+            R = R * axis_rotation(axis, sp.cos(coords.q[iq]), sp.sin(coords.q[iq]))
         else:
-            d = d + R * axis * coords.q[k]
+            d = d + R * axis * coords.q[iq]
         action = axis * coords.tau[k]          # in the child's frame
         reaction = -(R * action)               # in the parent's frame
         for r in range(n):

@@ -68,9 +68,10 @@ class CoordinateSymbols:
 
     @classmethod
     def for_model(cls, model: Model) -> CoordinateSymbols:
+        """q has the model's nq configuration entries; qd, qdd, tau its nv coordinates."""
         names = model.coordinates
         return cls(
-            q=[Coordinate(n) for n in names],
+            q=[Coordinate(n) for n in model.configuration],
             qd=[Rate(f"{n}_d") for n in names],
             qdd=[Acceleration(f"{n}_dd") for n in names],
             tau=[Torque(f"tau_{n}") for n in names],
@@ -127,31 +128,56 @@ def axis_rotation(axis: Vec, c: sp.Expr, s: sp.Expr) -> sp.Matrix:
     return R.applyfunc(sp.expand)
 
 
+def joint_transform(joint, q: list, rec: Recorder) -> tuple[sp.Matrix, Vec]:
+    """The parent-frame components of the child's axes, R, and the child's origin in the
+    parent's frame, d, at the joint's configuration entries `q` (none for a fixed joint,
+    one for a 1-dof joint, 7 for a floating one: position and quaternion x, y, z, w)."""
+    R = sp.Matrix(joint.origin_rotation)
+    d = sp.Matrix(joint.origin_xyz)
+    if joint.floating:  # the joint's origin, then the free motion (Pinocchio's order)
+        return ((R * quaternion_rotation(q[3:7], rec)).applyfunc(sp.expand),
+                d + R * sp.Matrix(q[:3]))
+    if joint.rotates:
+        axis = unit_axis(joint.axis)
+        c, s = rec.name(sp.cos(q[0])), rec.name(sp.sin(q[0]))
+        R = (R * axis_rotation(axis, c, s)).applyfunc(sp.expand)
+    elif joint.type == "prismatic":
+        d = d + R * unit_axis(joint.axis) * q[0]
+    return R, d
+
+
+def quaternion_rotation(quaternion, rec: Recorder) -> sp.Matrix:
+    """The rotation of a quaternion (x, y, z, w), each entry named. Divided by its squared
+    norm, so that any non-zero quaternion gives a rotation (an integrator's drift off the
+    unit sphere changes nothing), and a unit one gives Eigen's / Pinocchio's matrix."""
+    x, y, z, w = quaternion
+    s = rec.name(2 / (x * x + y * y + z * z + w * w))
+    xs, ys, zs = rec.name(x * s), rec.name(y * s), rec.name(z * s)
+    entries = [[1 - (y * ys + z * zs), x * ys - w * zs, x * zs + w * ys],
+               [x * ys + w * zs, 1 - (x * xs + z * zs), y * zs - w * xs],
+               [x * zs - w * ys, y * zs + w * xs, 1 - (x * xs + y * ys)]]
+    return sp.Matrix(entries).applyfunc(rec.name)
+
+
 def derive_kinematics(model: Model, coords: CoordinateSymbols, rec: Recorder) -> list[BodyKinematics]:
-    index = {b.joint.name: k for k, b in enumerate(model.moving_bodies)}
+    index = model.indices()
     world = BodyKinematics(body=None, gravity=sp.Matrix(model.gravity))
     frames: dict[str, BodyKinematics] = {"world": world}
     out = []
     for body in model.bodies:
         parent = frames[body.parent]
-        k = index.get(body.joint.name) if body.joint.moves else None
-        kin = _child_kinematics(body, parent, k, coords, rec)
+        kin = _child_kinematics(body, parent, index.get(body.name), coords, rec)
         frames[body.name] = kin
         out.append(kin)
     return out
 
 
-def _child_kinematics(body: Body, parent: BodyKinematics, k: int | None,
+def _child_kinematics(body: Body, parent: BodyKinematics, start: tuple[int, int] | None,
                       coords: CoordinateSymbols, rec: Recorder) -> BodyKinematics:
     joint = body.joint
+    iq, iv = start if start is not None else (0, 0)
+    R, d = joint_transform(joint, coords.q[iq: iq + joint.nq], rec)
     axis = unit_axis(joint.axis)
-    R = sp.Matrix(joint.origin_rotation)
-    d = sp.Matrix(joint.origin_xyz)
-    if joint.rotates:
-        c, s = rec.name(sp.cos(coords.q[k])), rec.name(sp.sin(coords.q[k]))
-        R = (R * axis_rotation(axis, c, s)).applyfunc(sp.expand)
-    elif joint.type == "prismatic":
-        d = d + sp.Matrix(joint.origin_rotation) * axis * coords.q[k]
     RT = R.T
 
     def to_child(v: Vec) -> Vec:
@@ -169,14 +195,24 @@ def _child_kinematics(body: Body, parent: BodyKinematics, k: int | None,
     kin.gravity = to_child(parent.gravity)
     kin.position = to_child(parent.position + d)
     kin.w = w_in
-    if joint.rotates:
-        kin.Jw[k] = axis
-        relative = axis * coords.qd[k]
+    if joint.floating:
+        # quasi-velocities: the origin's velocity v and the angular velocity w, both in
+        # this frame; the acceleration of the origin is then dv/dt + w x v (its components
+        # turn with the frame), and the angular acceleration dw/dt
+        v, w = sp.Matrix(coords.qd[iv: iv + 3]), sp.Matrix(coords.qd[iv + 3: iv + 6])
+        for r in range(3):
+            kin.Jv[iv + r] = sp.eye(3)[:, r]
+            kin.Jw[iv + 3 + r] = sp.eye(3)[:, r]
+        kin.w = w
+        kin.a0 = rec.vec(kin.a0 + w.cross(v))
+    elif joint.rotates:
+        kin.Jw[iv] = axis
+        relative = axis * coords.qd[iv]
         kin.w = rec.vec(w_in + relative)
         kin.alpha0 = rec.vec(kin.alpha0 + w_in.cross(relative))
     elif joint.type == "prismatic":
-        kin.Jv[k] = axis
-        kin.a0 = rec.vec(kin.a0 + 2 * w_in.cross(axis * coords.qd[k]))
+        kin.Jv[iv] = axis
+        kin.a0 = rec.vec(kin.a0 + 2 * w_in.cross(axis * coords.qd[iv]))
     c_vec = sp.Matrix(body.com)
     for r in sorted(set(kin.Jv) | set(kin.Jw)):
         jv = kin.Jv.get(r, sp.zeros(3, 1))

@@ -35,7 +35,7 @@ import sympy as sp
 
 from ..model.model import Body, Model
 from .gibbs_appell import Equations
-from .kinematics import CoordinateSymbols, Recorder, axis_rotation, unit_axis
+from .kinematics import CoordinateSymbols, Recorder, joint_transform, unit_axis
 
 Vec = sp.Matrix
 ZERO = sp.zeros(3, 1)
@@ -47,7 +47,7 @@ class Link:
 
     body: Body
     parent: int | None          # index into the list of links, None for the world
-    k: int | None               # coordinate index, None for a fixed joint
+    k: int | None               # first velocity coordinate, None for a fixed joint
     rotates: bool
     axis: Vec                   # unit joint axis s, in this body's frame
     R: sp.Matrix                # parent-frame components of this frame's axes
@@ -55,6 +55,8 @@ class Link:
     mass: sp.Expr
     h: Vec                      # first moment m c about O_i
     I_O: sp.Matrix              # inertia about O_i
+    free: bool = False          # a floating joint: six velocity coordinates k ... k + 5,
+    #                             the origin's velocity and the angular velocity in frame i
 
     def to_child(self, v: Vec, rec: Recorder) -> Vec:
         return rec.vec(self.R.T * v)
@@ -101,34 +103,33 @@ def derive_recursive(model: Model) -> Equations:
 def _links(model: Model, coords: CoordinateSymbols, rec: Recorder) -> list[Link]:
     """The joint transforms and the inertias about the frame origins, parents first."""
     position = {b.name: i for i, b in enumerate(model.bodies)}
-    index = {b.joint.name: k for k, b in enumerate(model.moving_bodies)}
+    index = model.indices()
     links = []
     for body in model.bodies:
         joint = body.joint
-        k = index[joint.name] if joint.moves else None
-        axis = unit_axis(joint.axis)
-        R = sp.Matrix(joint.origin_rotation)
-        d = sp.Matrix(joint.origin_xyz)
-        if joint.rotates:
-            c, s = rec.name(sp.cos(coords.q[k])), rec.name(sp.sin(coords.q[k]))
-            R = (R * axis_rotation(axis, c, s)).applyfunc(sp.expand)
-        elif joint.type == "prismatic":
-            d = d + sp.Matrix(joint.origin_rotation) * axis * coords.q[k]
+        iq, iv = index.get(body.name, (0, None))
+        R, d = joint_transform(joint, coords.q[iq: iq + joint.nq], rec)
         m = sp.sympify(body.mass)
         c_vec = sp.Matrix(body.com)
         links.append(Link(
             body=body,
             parent=position.get(body.parent),
-            k=k,
+            k=iv,
             rotates=joint.rotates,
-            axis=axis,
+            axis=unit_axis(joint.axis),
             R=R.applyfunc(rec.name),
             d=rec.vec(d),
             mass=m,
             h=rec.vec(m * c_vec),
             I_O=_symmetric(sp.Matrix(body.inertia) + m * _cross_square(c_vec), rec),
+            free=joint.floating,
         ))
     return links
+
+
+def free_velocities(link: Link, rates: list) -> tuple[Vec, Vec]:
+    """A floating joint's coordinates as (linear, angular) 3-vectors (rates or torques)."""
+    return sp.Matrix(rates[link.k: link.k + 3]), sp.Matrix(rates[link.k + 3: link.k + 6])
 
 
 def _cross_square(c: Vec) -> sp.Matrix:
@@ -155,7 +156,9 @@ def _angular_velocities(links: list[Link], coords: CoordinateSymbols,
     w: list[Vec] = []
     for link in links:
         w_in = ZERO if link.parent is None else link.to_child(w[link.parent], rec)
-        if link.rotates:
+        if link.free:
+            w_in = free_velocities(link, coords.qd)[1]
+        elif link.rotates:
             w_in = rec.vec(w_in + link.axis * coords.qd[link.k])
         w.append(w_in)
     return w
@@ -179,7 +182,14 @@ def _rnea(links: list[Link], coords: CoordinateSymbols, rec: Recorder,
         if w is not None and link.parent is not None:
             w_in = link.to_child(w[link.parent], rec)
         s = link.axis
-        if link.k is not None and link.rotates:
+        if link.free:
+            v_lin, _ = free_velocities(link, coords.qd)
+            if qdd is not None:
+                a_lin, a_ang = free_velocities(link, qdd)
+                alpha_in, a_in = alpha_in + a_ang, a_in + a_lin
+            if w is not None:  # the origin's acceleration: d/dt of v's components + w x v
+                a_in = a_in + w[i].cross(v_lin)
+        elif link.k is not None and link.rotates:
             if qdd is not None:
                 alpha_in = alpha_in + s * qdd[link.k]
             if w_in is not None:
@@ -196,11 +206,13 @@ def _rnea(links: list[Link], coords: CoordinateSymbols, rec: Recorder,
     for i, link in enumerate(links):
         f, n = _body_wrench(link, alpha[i], acc[i], None if w is None else w[i], rec)
         F[i], N[i] = F[i] + f, N[i] + n
-    tau: list[sp.Expr] = [sp.Integer(0)] * sum(link.k is not None for link in links)
+    tau: list[sp.Expr] = [sp.Integer(0)] * len(coords.qd)
     for i in reversed(range(len(links))):
         link = links[i]
         F[i], N[i] = rec.vec(F[i]), rec.vec(N[i])
-        if link.k is not None:
+        if link.free:  # the wrench on the body: force, then moment about its origin
+            tau[link.k: link.k + 6] = [*F[i], *N[i]]
+        elif link.k is not None:
             tau[link.k] = rec.name(link.axis.dot(N[i] if link.rotates else F[i]))
         if link.parent is not None:
             f_up = link.to_parent(F[i], rec)
@@ -265,25 +277,47 @@ def _crba(links: list[Link], n: int, rec: Recorder) -> sp.Matrix:
             - mass[i] * _skew(d) * _skew(d)
     M = sp.zeros(n, n)
     for i, link in enumerate(links):
-        if link.k is None:
-            continue
-        s = link.axis
-        if link.rotates:
-            f, m_ = rec.vec(s.cross(h[i])), rec.vec(I_O[i] * s)
-        else:
-            f, m_ = rec.vec(mass[i] * s), rec.vec(h[i].cross(s))
-        M[link.k, link.k] = rec.name(s.dot(m_ if link.rotates else f))
-        j, child = link.parent, link
-        while j is not None:
-            f_up = child.to_parent(f, rec)
-            m_ = rec.vec(child.R * m_ + child.d.cross(f_up))
-            f = f_up
-            ancestor = links[j]
-            if ancestor.k is not None:
-                value = rec.name(ancestor.axis.dot(m_ if ancestor.rotates else f))
-                M[link.k, ancestor.k] = M[ancestor.k, link.k] = value
-            j, child = ancestor.parent, ancestor
+        for column, (f, m_) in _unit_momenta(link, mass[i], h[i], I_O[i], rec):
+            for row, value in _projections(link, f, m_, rec):
+                if row >= column:
+                    M[row, column] = M[column, row] = value
+            j, child = link.parent, link
+            while j is not None:
+                f_up = child.to_parent(f, rec)
+                m_ = rec.vec(child.R * m_ + child.d.cross(f_up))
+                f = f_up
+                ancestor = links[j]
+                for row, value in _projections(ancestor, f, m_, rec):
+                    M[row, column] = M[column, row] = value
+                j, child = ancestor.parent, ancestor
     return M
+
+
+def _unit_momenta(link: Link, mass, h: Vec, I_O: sp.Matrix, rec: Recorder):
+    """(coordinate, (force, moment)): the momentum of the composite body at O_i for a unit
+    rate of each of the joint's coordinates: P = m v + w x h, L = I_O w + h x v."""
+    if link.k is None:
+        return []
+    if link.free:
+        E = sp.eye(3)
+        linear = [(link.k + r, (rec.vec(mass * E[:, r]), rec.vec(h.cross(E[:, r]))))
+                  for r in range(3)]
+        angular = [(link.k + 3 + r, (rec.vec(E[:, r].cross(h)), rec.vec(I_O * E[:, r])))
+                   for r in range(3)]
+        return linear + angular
+    s = link.axis
+    if link.rotates:
+        return [(link.k, (rec.vec(s.cross(h)), rec.vec(I_O * s)))]
+    return [(link.k, (rec.vec(mass * s), rec.vec(h.cross(s))))]
+
+
+def _projections(link: Link, f: Vec, m_: Vec, rec: Recorder) -> list[tuple[int, sp.Expr]]:
+    """(coordinate, value): a spatial force projected on each of a joint's coordinates."""
+    if link.k is None:
+        return []
+    if link.free:
+        return [(link.k + r, rec.name(e)) for r, e in enumerate([*f, *m_])]
+    return [(link.k, rec.name(link.axis.dot(m_ if link.rotates else f)))]
 
 
 def _rotate_inertia(R: sp.Matrix, I: sp.Matrix, rec: Recorder) -> sp.Matrix:
@@ -311,7 +345,9 @@ def _energies(links: list[Link], coords: CoordinateSymbols, rec: Recorder, w: li
             v_in = link.to_child(v[j] + w[j].cross(link.d), rec)
             p_in = link.to_child(p[j] + link.d, rec)
             g_in = link.to_child(g[j], rec)
-        if link.k is not None and not link.rotates:
+        if link.free:
+            v_in = free_velocities(link, coords.qd)[0]
+        elif link.k is not None and not link.rotates:
             v_in = rec.vec(v_in + link.axis * coords.qd[link.k])
         v.append(v_in)
         p.append(p_in)

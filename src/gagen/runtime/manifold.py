@@ -1,0 +1,233 @@
+"""The configuration space of a model with floating joints, in NumPy (no SymPy).
+
+A floating joint's configuration is its body's origin p (in the world, or in the joint's
+origin frame) and a unit quaternion (x, y, z, w) for its orientation R; its velocity is
+the origin's velocity v and the angular velocity w, both in the body's frame. These
+follow Pinocchio's FreeFlyer, and so do `integrate` (q ⊕ v dt: the body moves along the
+twist (v, w) held constant in its own frame for dt, SE(3)'s exponential) and
+`difference` (its inverse, SE(3)'s logarithm). Every other coordinate is a number on a
+line: q + v dt and q1 - q0.
+
+`configuration_rate` is dq/dt of the equations of motion: p' = R v and
+quat' = 1/2 quat ⊗ (w, 0), plus `QUATERNION_RESTORING` (1 - |quat|^2) quat, a pull back
+to the unit sphere that is zero on it (the exact flow keeps |quat| = 1; an integrator's
+error would otherwise drift off it step after step). The compiled integrators use the
+same formula (codegen/templates/model/simulation.c.j2).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..manifest import QUATERNION_RESTORING
+
+
+def floating_slices(info) -> list[tuple[int, int]]:
+    """(first entry in q, first coordinate in v) of each floating joint of a ModelInfo."""
+    return info.floating_joints()
+
+
+def _velocity_to_configuration(info) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (in q, in v) of the coordinates that are plain numbers on a line."""
+    floating = floating_slices(info)
+    in_q = np.ones(info.nq, dtype=bool)
+    in_v = np.ones(info.dof, dtype=bool)
+    for iq, iv in floating:
+        in_q[iq: iq + 7] = False
+        in_v[iv: iv + 6] = False
+    return np.flatnonzero(in_q), np.flatnonzero(in_v)
+
+
+def rotation(quaternion: np.ndarray) -> np.ndarray:
+    """The rotation matrices of quaternions (..., 4) as (x, y, z, w), normalised first."""
+    x, y, z, w = np.moveaxis(np.asarray(quaternion, dtype=float), -1, 0)
+    s = 2.0 / (x * x + y * y + z * z + w * w)
+    R = np.empty(np.shape(x) + (3, 3))
+    R[..., 0, 0] = 1 - s * (y * y + z * z)
+    R[..., 0, 1] = s * (x * y - w * z)
+    R[..., 0, 2] = s * (x * z + w * y)
+    R[..., 1, 0] = s * (x * y + w * z)
+    R[..., 1, 1] = 1 - s * (x * x + z * z)
+    R[..., 1, 2] = s * (y * z - w * x)
+    R[..., 2, 0] = s * (x * z - w * y)
+    R[..., 2, 1] = s * (y * z + w * x)
+    R[..., 2, 2] = 1 - s * (x * x + y * y)
+    return R
+
+
+def quaternion_of(R: np.ndarray) -> np.ndarray:
+    """The unit quaternion (x, y, z, w), w >= 0, of rotation matrices (..., 3, 3)."""
+    R = np.asarray(R, dtype=float)
+    t = np.trace(R, axis1=-2, axis2=-1)
+    out = np.empty(R.shape[:-2] + (4,))
+    cases = np.stack([t, R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]], axis=-1).argmax(-1)
+    for case in range(4):
+        m = cases == case
+        if not np.any(m):
+            continue
+        r = R[m]
+        if case == 0:
+            s = np.sqrt(1.0 + t[m]) * 2
+            q = [(r[:, 2, 1] - r[:, 1, 2]) / s, (r[:, 0, 2] - r[:, 2, 0]) / s,
+                 (r[:, 1, 0] - r[:, 0, 1]) / s, s / 4]
+        else:
+            i = case - 1
+            j, k = (i + 1) % 3, (i + 2) % 3
+            s = np.sqrt(1.0 + r[:, i, i] - r[:, j, j] - r[:, k, k]) * 2
+            q = [None] * 4
+            q[i] = s / 4
+            q[j] = (r[:, j, i] + r[:, i, j]) / s
+            q[k] = (r[:, k, i] + r[:, i, k]) / s
+            q[3] = (r[:, k, j] - r[:, j, k]) / s
+        out[m] = np.stack(q, axis=-1)
+    out *= np.where(out[..., 3:] < 0, -1.0, 1.0)
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+def _hat(w: np.ndarray) -> np.ndarray:
+    W = np.zeros(np.shape(w)[:-1] + (3, 3))
+    W[..., 0, 1], W[..., 0, 2] = -w[..., 2], w[..., 1]
+    W[..., 1, 0], W[..., 1, 2] = w[..., 2], -w[..., 0]
+    W[..., 2, 0], W[..., 2, 1] = -w[..., 1], w[..., 0]
+    return W
+
+
+def _exp_coefficients(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """sin(t)/t, (1 - cos t)/t^2, (t - sin t)/t^3, by their series near 0."""
+    small = theta < 1e-4
+    t = np.where(small, 1.0, theta)
+    t2 = theta * theta
+    a = np.where(small, 1 - t2 / 6 + t2 * t2 / 120, np.sin(t) / t)
+    b = np.where(small, 0.5 - t2 / 24 + t2 * t2 / 720, (1 - np.cos(t)) / (t * t))
+    c = np.where(small, 1 / 6 - t2 / 120 + t2 * t2 / 5040, (t - np.sin(t)) / (t * t * t))
+    return a, b, c
+
+
+def exp6(nu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """SE(3)'s exponential of twists (..., 6) = (linear, angular): (R, p)."""
+    v, w = nu[..., :3], nu[..., 3:]
+    theta = np.linalg.norm(w, axis=-1)
+    a, b, c = _exp_coefficients(theta)
+    W = _hat(w)
+    W2 = W @ W
+    eye = np.eye(3)
+    R = eye + a[..., None, None] * W + b[..., None, None] * W2
+    V = eye + b[..., None, None] * W + c[..., None, None] * W2
+    return R, (V @ v[..., None])[..., 0]
+
+
+def log6(R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """SE(3)'s logarithm: the twist (linear, angular) whose exponential is (R, p)."""
+    cos = np.clip((np.trace(R, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0)
+    theta = np.arccos(cos)
+    small = theta < 1e-4
+    sin = np.sin(theta)
+    # w = theta / (2 sin theta) vee(R - R^T); near pi, from the symmetric part
+    vee = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0],
+                    R[..., 1, 0] - R[..., 0, 1]], axis=-1)
+    factor = np.where(small, 0.5 + theta ** 2 / 12,
+                      theta / (2 * np.where(np.abs(sin) < 1e-12, 1.0, sin)))
+    w = factor[..., None] * vee
+    near_pi = theta > np.pi - 1e-6
+    if np.any(near_pi):
+        B = (R[near_pi] + np.eye(3)) / 2
+        axis = np.sqrt(np.clip(np.diagonal(B, axis1=-2, axis2=-1), 0, None))
+        signs = np.sign(vee[near_pi])
+        signs[signs == 0] = 1
+        w[near_pi] = axis * signs * theta[near_pi][..., None]
+    a, b, c = _exp_coefficients(theta)
+    W = _hat(w)
+    # V^-1 = I - W/2 + (1/t^2)(1 - a/(2b)) W^2
+    t2 = np.where(small, 1.0, theta * theta)
+    d = np.where(small, 1 / 12 + theta ** 2 / 720, (1 - a / (2 * b)) / t2)
+    Vinv = np.eye(3) - W / 2 + d[..., None, None] * (W @ W)
+    return np.concatenate([(Vinv @ p[..., None])[..., 0], w], axis=-1)
+
+
+def configuration_rate(info, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """dq/dt at (q, v) (module docstring), for one state (nq,) or stacked (N, nq)."""
+    q, v = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
+    out = np.empty_like(q)
+    plain_q, plain_v = _velocity_to_configuration(info)
+    out[..., plain_q] = v[..., plain_v]
+    for iq, iv in floating_slices(info):
+        quat = q[..., iq + 3: iq + 7]
+        lin, w = v[..., iv: iv + 3], v[..., iv + 3: iv + 6]
+        out[..., iq: iq + 3] = (rotation(quat) @ lin[..., None])[..., 0]
+        x, y, z, s = np.moveaxis(quat, -1, 0)
+        a, b, c = np.moveaxis(w, -1, 0)
+        norm2 = x * x + y * y + z * z + s * s
+        pull = QUATERNION_RESTORING * (1 - norm2)
+        out[..., iq + 3] = 0.5 * (s * a + y * c - z * b) + pull * x
+        out[..., iq + 4] = 0.5 * (s * b + z * a - x * c) + pull * y
+        out[..., iq + 5] = 0.5 * (s * c + x * b - y * a) + pull * z
+        out[..., iq + 6] = -0.5 * (x * a + y * b + z * c) + pull * s
+    return out
+
+
+def integrate(info, q, v, dt=1.0) -> np.ndarray:
+    """q ⊕ v dt, as Pinocchio's `integrate(model, q, v * dt)`: fresh array(s)."""
+    q = np.array(q, dtype=float)
+    step = np.asarray(v, dtype=float) * dt
+    plain_q, plain_v = _velocity_to_configuration(info)
+    out = q.copy() if q.ndim == step.ndim else np.broadcast_to(q, step.shape[:-1] + q.shape[-1:]).copy()
+    out[..., plain_q] = out[..., plain_q] + step[..., plain_v]
+    for iq, iv in floating_slices(info):
+        quat = out[..., iq + 3: iq + 7]
+        _, dp = exp6(step[..., iv: iv + 6])
+        out[..., iq: iq + 3] = out[..., iq: iq + 3] + (rotation(quat) @ dp[..., None])[..., 0]
+        # quat ⊗ exp(w dt / 2): the quaternion moves continuously (no sign flips), as
+        # Pinocchio's does
+        turned = _multiply(quat, _exp_quaternion(step[..., iv + 3: iv + 6]))
+        out[..., iq + 3: iq + 7] = turned / np.linalg.norm(turned, axis=-1, keepdims=True)
+    return out
+
+
+def _exp_quaternion(w: np.ndarray) -> np.ndarray:
+    """The unit quaternion (x, y, z, w) of the rotation vector w."""
+    theta = np.linalg.norm(w, axis=-1)
+    half = theta / 2
+    small = theta < 1e-4
+    sinc = np.where(small, 0.5 - theta ** 2 / 48, np.sin(half) / np.where(small, 1.0, theta))
+    return np.concatenate([sinc[..., None] * w, np.cos(half)[..., None]], axis=-1)
+
+
+def _multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton's product of quaternions (x, y, z, w)."""
+    av, aw = a[..., :3], a[..., 3:]
+    bv, bw = b[..., :3], b[..., 3:]
+    vector = aw * bv + bw * av + np.cross(av, bv)
+    scalar = aw * bw - np.sum(av * bv, axis=-1, keepdims=True)
+    return np.concatenate([vector, scalar], axis=-1)
+
+
+def difference(info, q0, q1) -> np.ndarray:
+    """The v with `integrate(q0, v) == q1` (Pinocchio's `difference(model, q0, q1)`)."""
+    q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
+    shape = np.broadcast_shapes(q0.shape[:-1], q1.shape[:-1]) + (info.dof,)
+    out = np.empty(shape)
+    plain_q, plain_v = _velocity_to_configuration(info)
+    out[..., plain_v] = q1[..., plain_q] - q0[..., plain_q]
+    for iq, iv in floating_slices(info):
+        R0, R1 = rotation(q0[..., iq + 3: iq + 7]), rotation(q1[..., iq + 3: iq + 7])
+        R0T = np.swapaxes(R0, -1, -2)
+        dp = (R0T @ (q1[..., iq: iq + 3] - q0[..., iq: iq + 3])[..., None])[..., 0]
+        out[..., iv: iv + 6] = log6(R0T @ R1, dp)
+    return out
+
+
+def neutral(info) -> np.ndarray:
+    """The configuration with every coordinate 0 and every quaternion the identity."""
+    q = np.zeros(info.nq)
+    for iq, _ in floating_slices(info):
+        q[iq + 6] = 1.0
+    return q
+
+
+def normalized(info, q) -> np.ndarray:
+    """q with each floating joint's quaternion scaled to unit norm (a fresh array)."""
+    q = np.array(q, dtype=float)
+    for iq, _ in floating_slices(info):
+        quat = q[..., iq + 3: iq + 7]
+        q[..., iq + 3: iq + 7] = quat / np.linalg.norm(quat, axis=-1, keepdims=True)
+    return q
