@@ -316,8 +316,8 @@ def install_received_module(cache: Path, file_name: str, data: bytes, sha256: st
     if hashlib.sha256(data).hexdigest() != sha256:
         raise ValueError(f"the module {file_name} arrived damaged: its SHA-256 is not the "
                          "one the client sent")
-    if Path(file_name).name != file_name or not file_name.endswith(
-            tuple(importlib.machinery.EXTENSION_SUFFIXES)):
+    suffix = file_name[file_name.find("."):]  # e.g. .cpython-311-x86_64-linux-gnu.so
+    if Path(file_name).name != file_name or suffix not in importlib.machinery.EXTENSION_SUFFIXES:
         raise ValueError(f"the module {file_name} was built for another platform or Python "
                          f"than this worker's ({sysconfig.get_config_var('EXT_SUFFIX')}): "
                          "run the workers on the client's Python version and platform")

@@ -105,7 +105,9 @@ def run_on_cluster(client, dyn, plan: BatchPlan, chunk_size: int | None = None,
     q, qd, tau = (np.empty((runs, m, n)) for _ in range(3))
     stats = np.zeros((runs, 5), np.int64)
     failures: dict[int, str] = {}
-    remote = client.scatter(ModulePayload.of(dyn), broadcast=True)
+    # a key of its own per batch (hash=False): a content-hashed key could be the one a
+    # previous batch is just releasing, and its chunks would find the data gone
+    remote = client.scatter(ModulePayload.of(dyn), broadcast=True, hash=False)
     spans = blocks(runs, size)
     futures = {client.submit(run_chunk, remote, plan.rows(a, b), retries=retries, pure=False):
                (a, b) for a, b in spans}
@@ -116,7 +118,9 @@ def run_on_cluster(client, dyn, plan: BatchPlan, chunk_size: int | None = None,
             if future.status == "finished":
                 q[a:b], qd[a:b], tau[a:b], stats[a:b] = future.result()
             else:
-                _chunk_failed(future.exception(), a, b, retries, (q, qd, tau), stats, failures)
+                exc = (future.exception() if future.status == "error"
+                       else RuntimeError(f"the task was {future.status}"))
+                _chunk_failed(exc, a, b, retries, (q, qd, tau), stats, failures)
             future.release()
             done += b - a
             if progress is not None:
