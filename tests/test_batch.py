@@ -4,14 +4,13 @@ importing it needs no Dask. The Dask cluster's tests are in test_batch_dask.py."
 
 from __future__ import annotations
 
-import signal
 import subprocess
 import sys
 import textwrap
-import time
 
 import numpy as np
 import pytest
+from interrupting import interrupt_after_ready
 
 import gagen
 from gagen import ComputedTorque, Eq11Trajectory
@@ -202,17 +201,8 @@ def test_ctrl_c_stops_every_thread(cache_dir):
             sys.exit(3)
         sys.exit(4)
     """)
-    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
-    try:
-        assert proc.stdout.readline().strip() == "ready"
-        time.sleep(1.0)
-        sent = time.perf_counter()
-        proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=30)
-        stopped_after = time.perf_counter() - sent
-    finally:
-        proc.kill()
-    assert proc.returncode == 3 and "interrupted" in out
+    code, out, stopped_after = interrupt_after_ready(script)
+    assert code == 3 and "interrupted" in out
     assert stopped_after < 5.0
 
 

@@ -4,14 +4,12 @@ non-finite tolerances are refused up front, and NaN gets its own message."""
 
 from __future__ import annotations
 
-import signal
-import subprocess
-import sys
 import textwrap
 import time
 
 import numpy as np
 import pytest
+from interrupting import interrupt_after_ready
 
 import gagen
 from gagen import NonFiniteStateError, SingularMassMatrixError
@@ -41,17 +39,8 @@ def test_ctrl_c_stops_a_compiled_integration_within_a_second(cache_dir, run):
             sys.exit(3)
         sys.exit(4)
     """)
-    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
-    try:
-        assert proc.stdout.readline().strip() == "ready"
-        time.sleep(1.0)  # well inside the integration, which would take hours
-        sent = time.perf_counter()
-        proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=30)
-        stopped_after = time.perf_counter() - sent
-    finally:
-        proc.kill()
-    assert proc.returncode == 3 and "interrupted" in out
+    code, out, stopped_after = interrupt_after_ready(script)
+    assert code == 3 and "interrupted" in out
     assert stopped_after < 5.0
 
 

@@ -54,14 +54,22 @@ def _nonnegative(text: str) -> float:
     return value
 
 
-def _sample_count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
-    if not 2 <= value <= 10_000_000:
-        raise argparse.ArgumentTypeError(f"expected 2 to 10,000,000 samples, got {value}")
-    return value
+def _count(low: int, high: int, what: str) -> Callable[[str], int]:
+    """An argument type: a whole number of `what` from low to high."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"expected {low:,} to {high:,} {what}, got {value}")
+        return value
+
+    return parse
+
+
+_sample_count = _count(2, 10_000_000, "samples")
+_run_count = _count(1, 100_000_000, "runs")
 
 
 def _numbers(text: str) -> list[float]:
@@ -154,16 +162,6 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                    help="leave out the gravity torque g(q) of the PD law")
     p.add_argument("--gif", action="store_true",
                    help="also write arm.gif, an animation of the arm (a few seconds)")
-
-
-def _run_count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
-    if not 1 <= value <= 100_000_000:
-        raise argparse.ArgumentTypeError(f"expected 1 to 100,000,000 runs, got {value}")
-    return value
 
 
 def _sweep_arguments(p: argparse.ArgumentParser) -> None:

@@ -1,0 +1,23 @@
+"""Ctrl-C in a subprocess, for the tests that check that long runs stop."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+
+
+def interrupt_after_ready(script: str, delay: float = 1.0) -> tuple[int, str, float]:
+    """Run `script` (which prints "ready" before its long run), send SIGINT `delay` seconds
+    after "ready", and return (exit code, the rest of stdout, seconds it took to stop)."""
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "ready"
+        time.sleep(delay)  # well inside the run, which would take hours
+        sent = time.perf_counter()
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=30)
+        return proc.returncode, out, time.perf_counter() - sent
+    finally:
+        proc.kill()
