@@ -132,3 +132,20 @@ def test_a_failing_chunk_is_retried_and_a_lost_one_costs_only_its_runs(client, r
     assert all("injected fault that stays" in res.message[i] and "runs 6 to 8" in res.message[i]
                for i in lost)
     assert res.stats["failed"] == 3
+
+
+def test_the_sweep_command_runs_on_a_scheduler_address(client, tmp_path, cache_dir, capsys):
+    from gagen.app.cli import main
+
+    address = client.scheduler.address
+    out = tmp_path / "mc.npz"
+    assert main(["sweep", "rrr", "--runs", "6", "--vary", "m3=40:60", "--duration", "0.5",
+                 "--points", "11", "--no-plot", "--scheduler", address, "--out", str(out),
+                 "--cache-dir", str(cache_dir)]) == 0
+    assert "6 runs in" in capsys.readouterr().out
+    local = tmp_path / "local.npz"
+    assert main(["-q", "sweep", "rrr", "--runs", "6", "--vary", "m3=40:60", "--duration",
+                 "0.5", "--points", "11", "--no-plot", "--out", str(local)]) == 0
+    with np.load(out) as a, np.load(local) as b:
+        for name in ("q", "qd", "tau", "p", "status"):
+            assert np.array_equal(a[name], b[name]), name

@@ -271,24 +271,16 @@ def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
              "atol": atol, "duration": duration, "runs": runs, "seed": seed,
              "vary": [v.text for v in parsed], "controller": repr(nominal)}
     store = open_store(path, runs, t_eval, dyn.n, attrs)
-    client = _client(scheduler)
     size = block_runs or _block_runs(runs, points, dyn.n, getattr(store, "chunk", 1))
     log.info(f"{runs:,} runs of {duration:g} s with {method}, in {len(blocks(runs, size))} "
              f"block(s) of up to {size:,} runs, to {path}")
-    progress = ProgressBar(runs)
     start = time.perf_counter()
-    final = np.full((runs, dyn.n), np.nan)
-    fan = None
-    failures: dict[str, str] = {}
-    for a, b in blocks(runs, size):
-        res = run_batch(dyn, plan.rows(a, b), threads=threads, client=client,
-                        progress=lambda done, _total, a=a: progress(a + done))
-        _store_block(store, plan, a, b, res)
-        final[a:b][res.ok] = res.q[res.ok, -1]
-        for i in np.flatnonzero(~res.ok)[: max(0, FAILURES_KEPT - len(failures))]:
-            failures[str(a + i)] = res.message[i]
-        if fan is None:
-            fan = res.q[:FAN_RUNS].copy()
+    client = _client(scheduler)
+    try:
+        final, fan, failures = _run_blocks(dyn, plan, store, size, threads, client)
+    finally:
+        if client is not None:
+            client.close()
     seconds = time.perf_counter() - start
     failed = int(np.isnan(final).any(axis=1).sum())
     store.close({"failed": failed, "failures": failures, "wall_time": seconds})
@@ -302,6 +294,26 @@ def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
         run.files.append(fig2_fan(t_eval, fan, nominal_run.q, model,
                                   path.with_name(f"{path.stem}_fan.png"), total=runs))
     return run
+
+
+def _run_blocks(dyn, plan: BatchPlan, store, size: int, threads, client):
+    """Run the plan block by block into the store: (final q (N, n), NaN for failed runs;
+    the first FAN_RUNS runs' q; the messages of up to FAILURES_KEPT failed runs)."""
+    runs = plan.runs
+    progress = ProgressBar(runs)
+    final = np.full((runs, dyn.n), np.nan)
+    fan = None
+    failures: dict[str, str] = {}
+    for a, b in blocks(runs, size):
+        res = run_batch(dyn, plan.rows(a, b), threads=threads, client=client,
+                        progress=lambda done, _total, a=a: progress(a + done))
+        _store_block(store, plan, a, b, res)
+        final[a:b][res.ok] = res.q[res.ok, -1]
+        for i in np.flatnonzero(~res.ok)[: max(0, FAILURES_KEPT - len(failures))]:
+            failures[str(a + i)] = res.message[i]
+        if fan is None:
+            fan = res.q[:FAN_RUNS].copy()
+    return final, fan, failures
 
 
 def _row(table, i: int, default):
