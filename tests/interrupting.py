@@ -11,6 +11,10 @@ import time
 def interrupt_after_ready(script: str, delay: float = 1.0) -> tuple[int, str, float]:
     """Run `script` (which prints "ready" before its long run), send SIGINT `delay` seconds
     after "ready", and return (exit code, the rest of stdout, seconds it took to stop)."""
+    # A shell starts background jobs with SIGINT ignored, and Python then installs no
+    # handler of its own: give the script Python's usual Ctrl-C whatever it inherited.
+    script = ("import signal\nsignal.signal(signal.SIGINT, signal.default_int_handler)\n"
+              + script)
     proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout.readline().strip() == "ready"

@@ -52,6 +52,8 @@ def machine_table(m: dict) -> str:
         ("gagen", m.get("gagen")),
         ("Pinocchio / PyDy", (f"{m.get('pinocchio') or 'not installed'} / "
                              f"{m.get('pydy') or 'not installed'}")),
+        ("MuJoCo / Dask distributed", (f"{m.get('mujoco') or 'not installed'} / "
+                                       f"{m.get('dask') or 'not installed'}")),
         ("date", m.get("date")),
     ]
     lines = ["| machine | |", "|---|---|"]
