@@ -25,3 +25,18 @@ def interrupt_after_ready(script: str, delay: float = 1.0) -> tuple[int, str, fl
         return proc.returncode, out, time.perf_counter() - sent
     finally:
         proc.kill()
+
+
+def seconds_to_stop(call: str) -> float:
+    """Run `call` (Python, with numpy as np, gagen, and dyn = rrr loaded) in a subprocess,
+    press Ctrl-C a second into it, check that it raised KeyboardInterrupt; the seconds it
+    took to stop."""
+    script = (
+        "import sys\nimport numpy as np\nimport gagen\ndyn = gagen.load('rrr')\n"
+        "print('ready', flush=True)\n"
+        f"try:\n    {call}\n"
+        "except KeyboardInterrupt:\n    print('interrupted', flush=True)\n    sys.exit(3)\n"
+        "sys.exit(4)\n")
+    code, out, seconds = interrupt_after_ready(script)
+    assert code == 3 and "interrupted" in out, (code, out)
+    return seconds

@@ -139,6 +139,16 @@ def _run_arguments(p: argparse.ArgumentParser, what: str) -> None:
     _add_cache_dir(p)
 
 
+def _add_tolerances(p: argparse.ArgumentParser) -> None:
+    """--rtol, --atol (adaptive methods) and --step (rk4)."""
+    p.add_argument("--rtol", type=_positive, default=1e-6,
+                   help="relative tolerance (default: %(default)s)")
+    p.add_argument("--atol", type=_nonnegative, default=1e-8,
+                   help="absolute tolerance (default: %(default)s)")
+    p.add_argument("--step", type=_positive, default=1e-3, metavar="H",
+                   help="fixed step of rk4 in seconds (default: %(default)s)")
+
+
 def _simulate_arguments(p: argparse.ArgumentParser) -> None:
     _run_arguments(p, "simulated time")
     p.add_argument("--method", choices=COMPILED_METHODS + SCIPY_METHODS, default=None,
@@ -146,12 +156,7 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                    "the same steps as scipy's RK45, the paper's ode45); or any "
                    "scipy.integrate.solve_ivp method (default: dopri5 with the compiled "
                    "backend, RK45 with lambdify)")
-    p.add_argument("--rtol", type=_positive, default=1e-6,
-                   help="relative tolerance (default: %(default)s)")
-    p.add_argument("--atol", type=_nonnegative, default=1e-8,
-                   help="absolute tolerance (default: %(default)s)")
-    p.add_argument("--step", type=_positive, default=1e-3, metavar="H",
-                   help="fixed step of rk4 in seconds (default: %(default)s)")
+    _add_tolerances(p)
     _add_numbers(p, "--target", "PD target, degrees (metres for prismatic joints), one value "
                  "or one per coordinate", "-60 -60 -30")
     _add_numbers(p, "--kp", "proportional gains, one value or one per coordinate",
@@ -180,12 +185,7 @@ def _sweep_arguments(p: argparse.ArgumentParser) -> None:
                    help="output samples per run, evenly spaced (default: %(default)s)")
     p.add_argument("--method", choices=COMPILED_METHODS, default="dopri5",
                    help="gagen's C integrator (default: %(default)s)")
-    p.add_argument("--rtol", type=_positive, default=1e-6,
-                   help="relative tolerance (default: %(default)s)")
-    p.add_argument("--atol", type=_nonnegative, default=1e-8,
-                   help="absolute tolerance (default: %(default)s)")
-    p.add_argument("--step", type=_positive, default=1e-3, metavar="H",
-                   help="fixed step of rk4 in seconds (default: %(default)s)")
+    _add_tolerances(p)
     p.add_argument("--threads", type=int, default=None, metavar="K",
                    help="threads for the runs (default: every core)")
     p.add_argument("--scheduler", metavar="ADDRESS",
