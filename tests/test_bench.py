@@ -212,7 +212,7 @@ def test_bench_smoke_run_writes_the_report(tmp_path, cache_dir, capsys):
     out = tmp_path / "bench"
     assert main(["bench", "--out", str(out), "--smoke", "--cache-dir", str(cache_dir)]) == 0
     progress = capsys.readouterr().out
-    for section in ("per call", "batched", "simulation", "scaling", "report"):
+    for section in ("per call", "batched", "simulation", "throughput", "scaling", "report"):
         assert f"] {section}:" in progress, section
     text = (out / "report.md").read_text()
     assert f"| CPU | {cpu_model()}" in text
@@ -228,6 +228,11 @@ def test_bench_smoke_run_writes_the_report(tmp_path, cache_dir, capsys):
     assert all(math.isfinite(r["median_us"]) and r["median_us"] > 0 for r in rows)
     assert {r["N"] for r in results["batched"]["rows"]} == {1, 10, 100}
     assert [r["case"] for r in results["simulation"]["rows"]] == ["a", "b", "c", "d"]
+    tp = results["throughput"]["rows"]
+    assert [r["candidate"] for r in tp][0::2] == ["gagen, 1 thread",
+                                                  "Python loop over gagen.simulate"]
+    assert all(r["sims_per_s"] > 0 and r["runs"] == 8 for r in tp)
+    assert "## Throughput: many simulations at once" in text
     assert [r["model"] for r in results["scaling"]["rows"]] == ["chain:2"]
     for png in ("percall.png", "batched.png", "simulation.png", "scaling.png"):
         assert (out / png).exists()

@@ -17,6 +17,7 @@ from .errors import (
     SingularMassMatrixError,
 )
 from .loading import load
+from .sim.batch import BatchResult, simulate_batch
 from .sim.controllers import PD, ComputedTorque, paper_controller
 from .sim.simulate import SimulationResult, inverse_dynamics_along, simulate
 from .sim.trajectory import Eq11Trajectory
@@ -32,6 +33,7 @@ _LAZY = {
 
 __all__ = [
     "PD",
+    "BatchResult",
     "BuildError",
     "ComputedTorque",
     "Eq11Trajectory",
@@ -49,6 +51,7 @@ __all__ = [
     "paper_controller",
     "resolve_model",
     "simulate",
+    "simulate_batch",
 ]
 
 

@@ -54,14 +54,22 @@ def _nonnegative(text: str) -> float:
     return value
 
 
-def _sample_count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
-    if not 2 <= value <= 10_000_000:
-        raise argparse.ArgumentTypeError(f"expected 2 to 10,000,000 samples, got {value}")
-    return value
+def _count(low: int, high: int, what: str) -> Callable[[str], int]:
+    """An argument type: a whole number of `what` from low to high."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"expected {low:,} to {high:,} {what}, got {value}")
+        return value
+
+    return parse
+
+
+_sample_count = _count(2, 10_000_000, "samples")
+_run_count = _count(1, 100_000_000, "runs")
 
 
 def _numbers(text: str) -> list[float]:
@@ -131,6 +139,16 @@ def _run_arguments(p: argparse.ArgumentParser, what: str) -> None:
     _add_cache_dir(p)
 
 
+def _add_tolerances(p: argparse.ArgumentParser) -> None:
+    """--rtol, --atol (adaptive methods) and --step (rk4)."""
+    p.add_argument("--rtol", type=_positive, default=1e-6,
+                   help="relative tolerance (default: %(default)s)")
+    p.add_argument("--atol", type=_nonnegative, default=1e-8,
+                   help="absolute tolerance (default: %(default)s)")
+    p.add_argument("--step", type=_positive, default=1e-3, metavar="H",
+                   help="fixed step of rk4 in seconds (default: %(default)s)")
+
+
 def _simulate_arguments(p: argparse.ArgumentParser) -> None:
     _run_arguments(p, "simulated time")
     p.add_argument("--method", choices=COMPILED_METHODS + SCIPY_METHODS, default=None,
@@ -138,12 +156,7 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                    "the same steps as scipy's RK45, the paper's ode45); or any "
                    "scipy.integrate.solve_ivp method (default: dopri5 with the compiled "
                    "backend, RK45 with lambdify)")
-    p.add_argument("--rtol", type=_positive, default=1e-6,
-                   help="relative tolerance (default: %(default)s)")
-    p.add_argument("--atol", type=_nonnegative, default=1e-8,
-                   help="absolute tolerance (default: %(default)s)")
-    p.add_argument("--step", type=_positive, default=1e-3, metavar="H",
-                   help="fixed step of rk4 in seconds (default: %(default)s)")
+    _add_tolerances(p)
     _add_numbers(p, "--target", "PD target, degrees (metres for prismatic joints), one value "
                  "or one per coordinate", "-60 -60 -30")
     _add_numbers(p, "--kp", "proportional gains, one value or one per coordinate",
@@ -154,6 +167,34 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                    help="leave out the gravity torque g(q) of the PD law")
     p.add_argument("--gif", action="store_true",
                    help="also write arm.gif, an animation of the arm (a few seconds)")
+
+
+def _sweep_arguments(p: argparse.ArgumentParser) -> None:
+    _add_model(p)
+    p.add_argument("--runs", type=_run_count, default=100, metavar="N",
+                   help="number of simulations (default: %(default)s)")
+    p.add_argument("--vary", action="append", default=[], metavar="NAME=LO:HI|NAME=P%",
+                   help="draw NAME for every run, uniformly in [LO, HI] or within +-P %% of "
+                   "its default; NAME is a parameter (patterns allowed: 'm[123]=20%%'), or "
+                   "q0, qd0, kp, kd, target (degrees for angles), or one coordinate of them "
+                   "(q0.q2=-10:10); repeat for several")
+    p.add_argument("--seed", type=int, default=0, help="seed of the draws (default: 0)")
+    p.add_argument("--duration", type=_positive, default=5.0, metavar="S",
+                   help="simulated time in seconds (default: %(default)s)")
+    p.add_argument("--points", type=_sample_count, default=501, metavar="N",
+                   help="output samples per run, evenly spaced (default: %(default)s)")
+    p.add_argument("--method", choices=COMPILED_METHODS, default="dopri5",
+                   help="gagen's C integrator (default: %(default)s)")
+    _add_tolerances(p)
+    p.add_argument("--threads", type=int, default=None, metavar="K",
+                   help="threads for the runs (default: every core)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on a Dask cluster, e.g. tcp://host:8786 (needs gagen[dask])")
+    p.add_argument("--out", metavar="FILE",
+                   help="results: FILE.zarr (streamed in blocks; needs gagen[zarr]) or "
+                   "FILE.npz (default: out/<model>/sweep.zarr, or .npz without Zarr)")
+    p.add_argument("--no-plot", action="store_true", help="do not draw the fan figure")
+    _add_cache_dir(p)
 
 
 def _inverse_arguments(p: argparse.ArgumentParser) -> None:
@@ -284,6 +325,19 @@ def inverse_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def sweep_command(args: argparse.Namespace) -> int:
+    """Many simulations with varied parameters, states and gains (gagen.app.sweep)."""
+    from .sweep import print_sweep_report, run_sweep
+
+    run = run_sweep(args.model, runs=args.runs, variations=args.vary, seed=args.seed,
+                    duration=args.duration, points=args.points, method=args.method,
+                    rtol=args.rtol, atol=args.atol, step=args.step, threads=args.threads,
+                    scheduler=args.scheduler, out=args.out, cache_dir=args.cache_dir,
+                    plot=not args.no_plot)
+    print_sweep_report(run)
+    return 0
+
+
 def paper_command(args: argparse.Namespace) -> int:
     """The paper's reproduction (gagen.app.paper.reproduce_paper)."""
     from .paper import reproduce_paper
@@ -334,6 +388,18 @@ INVERSE_DESCRIPTION = (
     "the joint limits). Writes inverse.csv (t, q, qd, qdd, tau) and fig4_inverse.png into\n"
     "--out and prints the peak torques. Put MODEL before --qf.")
 
+SWEEP_DESCRIPTION = (
+    "Many runs of `simulate`'s setup (from rest at q = 0 under its PD law, rrr: the paper's),\n"
+    "each with its own uniform draw of every --vary, run in C on every core\n"
+    "(gagen.simulate_batch) or on a Dask cluster (--scheduler). Example, the paper's Fig. 2\n"
+    "under +-20 % mass uncertainty:\n\n"
+    "  python -m gagen sweep rrr --runs 1000 --vary 'm[123]=20%' --out out/rrr/sweep.zarr\n\n"
+    "Writes FILE (.zarr: t, q, qd, tau (N, m, n), status, nfev, steps, rejected, q0, qd0,\n"
+    "p, kp, kd, target; streamed in blocks; read it with zarr.open_group or xarray.open_zarr.\n"
+    ".npz: the same arrays, read with np.load), FILE's stem + _fan.png (every run's q(t),\n"
+    "5-95 % band, median, nominal, deviation from the nominal) and + _final.csv (statistics\n"
+    "of the final state, also printed).")
+
 COMMANDS: dict[str, Command] = {
     "build": Command(
         build_command, "derive, generate C and compile a model", _build_arguments,
@@ -346,6 +412,9 @@ COMMANDS: dict[str, Command] = {
                         _simulate_arguments, SIMULATE_DESCRIPTION, preformatted=True),
     "inverse": Command(inverse_command, "inverse dynamics along eq. 11: the paper's Fig. 4",
                        _inverse_arguments, INVERSE_DESCRIPTION, preformatted=True),
+    "sweep": Command(sweep_command,
+                     "many simulations at once under varied parameters: Monte-Carlo, sweeps",
+                     _sweep_arguments, SWEEP_DESCRIPTION, preformatted=True),
     "paper": Command(
         paper_command,
         "reproduce the paper: Fig. 2, 3 (direct) and Fig. 4 (inverse dynamics)",

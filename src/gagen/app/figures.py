@@ -318,3 +318,53 @@ def arm_gif(model: Model, t, q, path, p=None, fps: int = 20, max_frames: int = 6
     path.parent.mkdir(parents=True, exist_ok=True)
     anim.save(path, writer=PillowWriter(fps=fps), dpi=dpi)
     return path
+
+
+def fig2_fan(t, q_runs, q_nominal=None, model: Model | None = None, path=None,
+             title: str | None = None, total: int | None = None):
+    """Fig. 2 of many runs: each coordinate's trajectories (thin lines), the 5-95 % band
+    and the median across runs, the nominal run (bold, if given) and, in a second column,
+    each run's deviation from the nominal one.
+
+    q_runs (N, m, n) are the runs drawn (failed runs, NaN, are left out); `total` is the
+    number of runs of the sweep they were taken from, for the title."""
+    t = np.asarray(t, dtype=float)
+    q_runs = np.asarray(q_runs, dtype=float)
+    q_runs = q_runs[~np.isnan(q_runs).any(axis=(1, 2))]
+    n = q_runs.shape[2]
+    units = _units(model, n)
+    names = _coordinate_names(model, n)
+    values = _display(q_runs, units)
+    nominal = None if q_nominal is None else _display(np.asarray(q_nominal, dtype=float), units)
+    columns = 1 if nominal is None else 2
+    fig = _new_figure(6.4 if columns == 1 else 11.0, 1.2 + 1.6 * n)
+    axes = fig.subplots(n, columns, sharex=True, squeeze=False)
+    for k in range(n):
+        _fan_panel(axes[k, 0], t, values[:, :, k], None if nominal is None else nominal[:, k])
+        _label(axes[k, 0], names[k], units[k])
+        if nominal is not None:
+            _fan_panel(axes[k, 1], t, values[:, :, k] - nominal[:, k], None)
+            _label(axes[k, 1], f"{names[k]} - nominal", units[k])
+    axes[0, 0].legend(loc="best", fontsize=8)
+    for ax in axes[-1]:
+        ax.set_xlabel("t (s)")
+    name = model.name if model is not None else "model"
+    shown = f"{len(values)} runs" if total in (None, len(values)) else \
+        f"{len(values)} of {total} runs"
+    fig.suptitle(title or f"Fig. 2 under uncertainty ({name}, {shown})")
+    fig.tight_layout()
+    return _finish(fig, path)
+
+
+def _fan_panel(ax, t, runs: np.ndarray, nominal) -> None:
+    """Runs (N, m) as thin lines, their 5-95 % band and median, and the nominal run."""
+    if len(runs):
+        alpha = float(np.clip(8.0 / len(runs), 0.03, 0.5))
+        ax.plot(t, runs.T, color="C0", lw=0.6, alpha=alpha)
+        lo, mid, hi = np.percentile(runs, [5, 50, 95], axis=0)
+        ax.fill_between(t, lo, hi, color="C1", alpha=0.3, lw=0, label="5-95 %")
+        ax.plot(t, mid, color="C1", lw=1.2, label="median")
+    if nominal is not None:
+        ax.plot(t, nominal, color="k", lw=1.4, ls="--", label="nominal")
+    ax.grid(True, alpha=0.3)
+    ax.set_xlim(t[0], t[-1])

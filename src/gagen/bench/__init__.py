@@ -22,6 +22,9 @@ Default (a few minutes on 2 cores):
   batched           compiled and lambdify forward dynamics on N = 1 ... 10000 states
   simulation        the paper's 5-s simulation: scipy RK45 (lambdify, compiled), compiled
                     dopri5 and rk4
+  throughput        many simulations: simulate_batch on 1 thread and every core, a Python
+                    loop over simulate, MuJoCo's rollout on the Panda (same RK4, no
+                    contacts), and Dask's overhead per chunk on a LocalCluster
   scaling           cold builds of chain:2, chain:4, chain:6 and the UR5: derive, generate,
                     compile times, operations before/after CSE, forward dynamics per call
 --full adds chain:3 ... chain:12 and the Panda to the scaling study, and the Panda

@@ -102,6 +102,8 @@ def machine_info() -> dict:
         "gagen": __version__,
         "pinocchio": version_of("pin", "pinocchio"),
         "pydy": version_of("pydy", "pydy"),
+        "mujoco": version_of("mujoco"),
+        "dask": version_of("distributed"),
         "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
     }
 

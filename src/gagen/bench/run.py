@@ -18,9 +18,11 @@ import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .common import PANDA, Progress, compiled, find_urdf_dir, machine_info
+import numpy as np
 
-SECTIONS = ("percall", "batched", "simulation", "scaling", "panda")
+from .common import PANDA, Progress, compiled, find_urdf_dir, machine_info, optional
+
+SECTIONS = ("percall", "batched", "simulation", "throughput", "scaling", "panda")
 
 
 @dataclass
@@ -35,7 +37,11 @@ class Settings:
     simulation_repeats: int = 11
     scaling_repeats: int = 21
     panda_repeats: int = 31
-    sections: tuple[str, ...] = ("percall", "batched", "simulation", "scaling")
+    throughput_repeats: int = 5
+    throughput_runs: int = 256  # paper runs per batch
+    throughput_panda_runs: int = 32  # Panda runs per batch (none: the Panda is left out)
+    throughput_dask_chunks: int = 16  # 0: Dask is left out
+    sections: tuple[str, ...] = ("percall", "batched", "simulation", "throughput", "scaling")
     scaling_models: list[str] | None = None  # None: the mode's default list
     extra: dict = field(default_factory=dict)
 
@@ -46,7 +52,8 @@ class Settings:
         if mode == "smoke":
             return cls(mode="smoke", target_s=1e-3, percall_repeats=3, batched_repeats=3,
                        batched_sizes=(1, 10, 100), simulation_repeats=2, scaling_repeats=3,
-                       panda_repeats=3, scaling_models=["chain:2"])
+                       panda_repeats=3, scaling_models=["chain:2"], throughput_repeats=2,
+                       throughput_runs=8, throughput_panda_runs=0, throughput_dask_chunks=0)
         return cls()
 
 
@@ -73,7 +80,8 @@ class Bench:
                                      "batched": settings.batched_repeats,
                                      "simulation": settings.simulation_repeats,
                                      "scaling": settings.scaling_repeats,
-                                     "panda": settings.panda_repeats}},
+                                     "panda": settings.panda_repeats,
+                                     "throughput": settings.throughput_repeats}},
             "notes": [],
         }
 
@@ -132,6 +140,78 @@ class Bench:
             f"lambdify backend: {verdict} ({c['speedup']:,.0f}x).")
         return {"rows": rows, "repeats": s.simulation_repeats}
 
+    def throughput(self) -> dict:
+        from ..sim.batch import default_threads
+        from . import throughput as tp
+
+        s = self.settings
+        threads = default_threads()
+        def say(text: str) -> None:
+            self.progress("throughput", text)
+
+        dyn = self.rrr()["compiled"]
+        paper = tp.paper_workload(dyn, s.throughput_runs)
+        say(f"paper: {s.throughput_runs} runs per call, 1 and {threads} threads, Python loop")
+        rows = tp.timing_rows(tp.gagen_candidates(paper, threads), s.throughput_runs,
+                              paper["samples"], s.throughput_repeats, s.target_s, "paper")
+        section = {"threads": threads, "repeats": s.throughput_repeats}
+        if s.throughput_panda_runs:
+            rows += self._panda_throughput(tp, threads, section)
+        if s.throughput_dask_chunks and optional("distributed") is None:
+            self._note("throughput", "Dask is not installed: its overhead is not measured "
+                       "(pip install gagen[dask]).")
+        elif s.throughput_dask_chunks:
+            say(f"Dask: a LocalCluster of 2 worker processes, {s.throughput_dask_chunks} chunks")
+            local = next(r["median_s"] for r in rows if r["workload"] == "paper"
+                         and r["candidate"] == f"gagen, {threads} threads")
+            rows += tp.dask_rows(dyn, s.throughput_runs, s.throughput_dask_chunks,
+                                 s.throughput_repeats, local)
+        section["speedups"] = tp.thread_speedups(rows)
+        for workload, speedup in sorted(section["speedups"].items()):
+            verdict = "met" if speedup >= tp.THREAD_GOAL or threads < 2 else "NOT met"
+            self.results["notes"].append(
+                f"Goal: simulate_batch on {threads} threads at least {tp.THREAD_GOAL}x faster "
+                f"than on 1 ({workload}): {verdict} ({speedup:.2f}x; the cores are shared).")
+        section["rows"] = rows
+        return section
+
+    def _panda_throughput(self, tp, threads: int, section: dict) -> list[dict]:
+        from ..model.resolve import resolve_model
+        from ..sim.batch import simulate_batch
+
+        s = self.settings
+        folder = find_urdf_dir(self.urdf_dir, needed=PANDA)
+        if folder is None:
+            self._note("throughput", f"{PANDA} not found: the Panda workload is skipped.")
+            return []
+        urdf = folder / PANDA
+        dyn = self.loaded.get(str(urdf))
+        if dyn is None:
+            dyn, _, times = compiled(resolve_model(urdf), self.scratch / "panda")
+            self.loaded[str(urdf)] = dyn
+            self.progress("throughput", f"Panda built in {times['build_s']:.1f} s")
+        runs = s.throughput_panda_runs
+        work = tp.panda_workload(dyn, runs)
+        candidates = tp.gagen_candidates(work, threads)
+        if optional("mujoco") is None:
+            self._note("throughput", "MuJoCo is not installed: its rollout is not timed "
+                       "(pip install mujoco).")
+        else:
+            ctrl = work["args"][4].c_spec(dyn.n)
+            model = tp.mujoco_panda(urdf, ctrl, list(dyn.coordinates))
+            peers, one_rollout = tp.mujoco_candidates(model, ctrl["target"], runs, threads)
+            candidates += peers
+            ours = simulate_batch(*work["args"], threads=1, **work["kwargs"]).q[0, 1:]
+            theirs = one_rollout()[0, :, 1:1 + dyn.n]
+            section["mujoco_max_dev_rad"] = float(np.abs(ours - theirs).max())
+        self.progress("throughput", f"Panda: {runs} runs per call")
+        return tp.timing_rows(candidates, runs, work["samples"], s.throughput_repeats,
+                              s.target_s, "panda")
+
+    def _note(self, section: str, text: str) -> None:
+        self.results["notes"].append(text)
+        self.progress(section, text)
+
     def scaling(self) -> dict:
         from .scaling import scaling_models, scaling_rows
 
@@ -185,9 +265,9 @@ class Bench:
     def run(self) -> int:
         failed = 0
         titles = {"percall": "per call", "batched": "batched", "simulation": "simulation",
-                  "scaling": "scaling", "panda": "panda"}
+                  "throughput": "throughput", "scaling": "scaling", "panda": "panda"}
         try:
-            if {"percall", "batched", "simulation"} & set(self.settings.sections):
+            if {"percall", "batched", "simulation", "throughput"} & set(self.settings.sections):
                 start = time.perf_counter()
                 try:
                     self.rrr()

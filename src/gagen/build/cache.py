@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib
+import importlib.machinery
 import importlib.util
 import json
 import os
@@ -302,6 +303,41 @@ def usable_cache_dir(cache: Path) -> Path:
                   f"{_fallback_cache} for this process instead. Set GAGEN_CACHE_DIR or "
                   "cache_dir= to a writable folder to keep builds.", CacheWarning, stacklevel=4)
     return _fallback_cache
+
+
+def install_received_module(cache: Path, file_name: str, data: bytes, sha256: str) -> Path:
+    """Put a module received from another machine (a Dask client) into this cache, under
+    received/<sha256>, and return its path; an intact copy already there is kept.
+
+    The bytes must have the SHA-256 the sender gave (nothing damaged on the way), and the
+    entry is written in a temporary folder renamed into place with its checksum, as a build
+    is, so that `cached_module_is_intact` guards every later import.
+    """
+    if hashlib.sha256(data).hexdigest() != sha256:
+        raise ValueError(f"the module {file_name} arrived damaged: its SHA-256 is not the "
+                         "one the client sent")
+    suffix = file_name[file_name.find("."):]  # e.g. .cpython-311-x86_64-linux-gnu.so
+    if Path(file_name).name != file_name or suffix not in importlib.machinery.EXTENSION_SUFFIXES:
+        raise ValueError(f"the module {file_name} was built for another platform or Python "
+                         f"than this worker's ({sysconfig.get_config_var('EXT_SUFFIX')}): "
+                         "run the workers on the client's Python version and platform")
+    entry = cache / "received" / sha256[:40]
+    if cached_module_is_intact(entry, file_name):
+        return entry / file_name
+    entry.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".gagen_received-", dir=entry.parent))
+    try:
+        (tmp / file_name).write_bytes(data)
+        (tmp / _CHECKSUM_FILE).write_text(_checksum(tmp / file_name))
+        if entry.exists():  # damaged: set aside, then replaced
+            discard_cache_entry(entry)
+        os.rename(tmp, entry)
+    except OSError:
+        if not cached_module_is_intact(entry, file_name):  # another process's copy wins
+            raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return entry / file_name
 
 
 def import_extension(path: Path, module_name: str):

@@ -199,12 +199,7 @@ def simulate(dyn, t_span, q0, qd0=None, controller=None, method: str = "RK45",
     t0, t1 = _pair(t_span)
     q0 = _vector(q0, n, "q0")
     qd0 = _vector(qd0, n, "qd0")
-    if not isinstance(method, str) and not isinstance(method, type):
-        raise TypeError(f"method must be a string, got {type(method).__name__}")
-    rtol = float(rtol)
-    if not (rtol > 0 and math.isfinite(rtol)):
-        raise ValueError(f"rtol must be a positive finite number, got {rtol}")
-    atol_arr = _atol(atol, n)
+    rtol, atol_arr = checked_tolerances(method, rtol, atol, n)
     pvec = dyn.parameter_vector(p)
     if controller is not None and not callable(controller):
         raise TypeError("controller must be None, a gagen controller or a callable "
@@ -214,6 +209,17 @@ def simulate(dyn, t_span, q0, qd0=None, controller=None, method: str = "RK45",
                                   t_eval, pvec, options)
     return _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol_arr, t_eval,
                            pvec, options)
+
+
+def checked_tolerances(method, rtol, atol, n: int):
+    """(rtol, atol) checked: the method a name or a solver class, rtol positive and finite,
+    atol nonnegative and finite (a float, or one entry per state)."""
+    if not isinstance(method, str) and not isinstance(method, type):
+        raise TypeError(f"method must be a string, got {type(method).__name__}")
+    rtol = float(rtol)
+    if not (rtol > 0 and math.isfinite(rtol)):
+        raise ValueError(f"rtol must be a positive finite number, got {rtol}")
+    return rtol, _atol(atol, n)
 
 
 def _atol(atol, n: int):
@@ -321,8 +327,32 @@ class _EmptySpan:
     message: str = "The span has zero length: the state stays the initial state."
 
 
-def _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval, pvec,
-                       options) -> SimulationResult:
+@dataclass(frozen=True)
+class CompiledSettings:
+    """What every run of a compiled integration shares: the arguments of
+    `CompiledSimulation.run` besides the initial state, checked once (`compiled_settings`)."""
+
+    method: str
+    t0: float
+    t1: float
+    t_eval: np.ndarray
+    rtol: float
+    atol: float | np.ndarray
+    first_step: float
+    max_step: float
+    max_steps: int
+    h: float
+
+    def run(self, sim, q0, qd0):
+        """sim.run(...) from (q0, qd0): (q, qd, tau, status, info)."""
+        return sim.run(self.method, self.t0, self.t1, q0, qd0, self.t_eval, self.rtol,
+                       self.atol, self.first_step, self.max_step, self.max_steps, self.h)
+
+
+def compiled_settings(dyn, method: str, t0: float, t1: float, rtol: float, atol, t_eval,
+                      options: dict) -> CompiledSettings:
+    """Check what a compiled integration needs (the compiled backend, the method's options,
+    the time grid, the step sizes and budget) and gather it."""
     module = getattr(dyn, "module", None)
     if getattr(dyn, "backend", None) != "compiled" or not hasattr(module, "CompiledSimulation"):
         raise ValueError(f"method '{method}' is gagen's compiled integrator and needs the "
@@ -334,20 +364,6 @@ def _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_e
     if unknown:
         raise TypeError(f"method '{method}' takes the options {', '.join(allowed)}; "
                         f"got {', '.join(unknown)}")
-    n = dyn.n
-    if controller is None:
-        spec = {"kind": 0}
-    elif isinstance(controller, Controller):
-        spec = controller.c_spec(n)  # checks the sizes against the model
-        if spec is None:
-            raise ValueError(f"{controller!r} has no C form (only an Eq11Trajectory runs in "
-                             f"the compiled integrator): use a scipy method such as "
-                             f"method='RK45'")
-    else:
-        raise ValueError(f"method '{method}' runs the whole simulation in C and cannot call a "
-                         "Python controller: use a gagen controller (PD, ComputedTorque with "
-                         "an Eq11Trajectory), or a scipy method such as method='RK45' (the "
-                         "same Dormand-Prince 5(4) steps as 'dopri5')")
     te = _time_grid(t_eval, t0, t1, allow_steps=False)
     h = float(options.get("h", DEFAULT_RK4_STEP))
     if method == "rk4" and not (math.isfinite(h) and h > 0):
@@ -362,19 +378,58 @@ def _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_e
         raise ValueError(f"rk4 with h = {h:g} over {abs(t1 - t0):g} s takes "
                          f"{abs(t1 - t0) / h:.3g} steps, more than max_steps = {max_steps:,}: "
                          "use a larger h, or pass a larger max_steps")
+    return CompiledSettings(method, t0, t1, te, rtol, atol, first_step, max_step, max_steps, h)
 
+
+_PYTHON_CONTROLLER_ADVICE = {
+    "simulate": "or a scipy method such as method='RK45' (the same Dormand-Prince 5(4) "
+                "steps as 'dopri5')",
+    "simulate_batch": "or a list of them, one per run; for a Python controller, loop over "
+                      "gagen.simulate with a scipy method such as method='RK45'",
+}
+
+
+def controller_spec(controller, method: str, n: int, caller: str = "simulate") -> dict:
+    """The keyword arguments of `CompiledSimulation` for a controller (None or a gagen
+    controller with a C form); ValueError for a Python callable, which C cannot call."""
+    if controller is None:
+        return {"kind": 0}
+    if isinstance(controller, Controller):
+        spec = controller.c_spec(n)  # checks the sizes against the model
+        if spec is None:
+            raise ValueError(f"{controller!r} has no C form (only an Eq11Trajectory runs in "
+                             f"the compiled integrator): use a scipy method such as "
+                             f"method='RK45'")
+        return spec
+    if caller == "simulate_batch":
+        raise ValueError("gagen.simulate_batch runs every run in C and cannot call a Python "
+                         f"controller ({_name(controller)}): use a gagen controller (PD, "
+                         "ComputedTorque with an Eq11Trajectory), "
+                         + _PYTHON_CONTROLLER_ADVICE[caller])
+    raise ValueError(f"method '{method}' runs the whole simulation in C and cannot call a "
+                     "Python controller: use a gagen controller (PD, ComputedTorque with "
+                     "an Eq11Trajectory), " + _PYTHON_CONTROLLER_ADVICE[caller])
+
+
+SUCCESS_MESSAGE = "The solver successfully reached the end of the integration interval."
+
+
+def _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval, pvec,
+                       options) -> SimulationResult:
+    settings = compiled_settings(dyn, method, t0, t1, rtol, atol, t_eval, options)
+    spec = controller_spec(controller, method, dyn.n)
     start = time.perf_counter()
-    sim = module.CompiledSimulation(dyn.kernels, pvec, **spec)
-    q, qd, tau, status, info = sim.run(method, t0, t1, q0, qd0, te, rtol, atol, first_step,
-                                       max_step, max_steps, h)
+    sim = dyn.module.CompiledSimulation(dyn.kernels, pvec, **spec)
+    q, qd, tau, status, info = settings.run(sim, q0, qd0)
+    te = settings.t_eval
     if status != 0:
-        _raise_status(status, method, te, q, dyn)
+        raise status_error(status, method, te, q, dyn.info.name)
     wall = time.perf_counter() - start
     stats = {"method": method, "backend": dyn.backend, "nfev": info["nfev"],
              "steps": info["naccepted"],
              "rejected": info["nrejected"] if method == "dopri5" else None,
              "wall_time": wall, "controller": _name(controller),
-             "message": "The solver successfully reached the end of the integration interval."}
+             "message": SUCCESS_MESSAGE}
     return SimulationResult(te, q, qd, tau, list(dyn.coordinates), stats)
 
 
@@ -394,18 +449,20 @@ def _name(controller) -> str | None:
     return getattr(controller, "__name__", None) or type(controller).__name__
 
 
-def _raise_status(status: int, method: str, te, q, dyn):
+def status_error(status: int, method: str, te, q, model_name: str) -> Exception:
+    """The exception for a compiled integration's nonzero status, saying where it stopped
+    (q holds NaN in the rows not reached)."""
     reached = ~np.isnan(q).any(axis=1)
     where = f" after t = {te[reached][-1]:g}" if reached.any() else " before the first sample"
     if status == 1:
-        raise SingularMassMatrixError(
-            f"{method}: the mass matrix of '{dyn.info.name}' became singular or not positive "
+        return SingularMassMatrixError(
+            f"{method}: the mass matrix of '{model_name}' became singular or not positive "
             f"definite{where}; check the parameters (zero or negative masses, inertias) and "
             "the state for NaN or inf")
     if status in (2, -105):
-        raise NonFiniteStateError(f"{method} failed{where}: {_NONFINITE}")
+        return NonFiniteStateError(f"{method} failed{where}: {_NONFINITE}")
     cause = _STATUS.get(status, f"the model returned error code {status}")
-    raise RuntimeError(f"{method} failed{where}: {cause} (status {status})")
+    return RuntimeError(f"{method} failed{where}: {cause} (status {status})")
 
 
 def inverse_dynamics_along(dyn, trajectory, t, p=None):

@@ -1,0 +1,428 @@
+"""`python -m gagen sweep`: many runs of the `simulate` command's setup, each with its own
+draw of parameters, initial state and gains, streamed to a file.
+
+Each --vary draws every run's value independently and uniformly:
+
+    NAME=LO:HI     between LO and HI (a parameter, or q0, qd0, kp, kd, target)
+    NAME=P%        within +-P % of the default value (parameters, kp, kd)
+
+NAME is a parameter (shell-style patterns allowed: 'm[123]=20%' varies m1, m2, m3
+independently), or q0, qd0, kp, kd, target for every coordinate (each drawn on its own),
+or one of them for one coordinate, q0.q2=-10:10. Angles are in degrees (q0, target) and
+degrees per second (qd0), as in `simulate`; prismatic coordinates in m and m/s.
+
+Results go to a Zarr store (`.zarr`, chunked along the runs, written block by block, so a
+sweep larger than memory streams to disk; `zarr.open_group(path)` or
+`xarray.open_zarr(path)` read it) or to NumPy's `.npz` (kept in memory, then written;
+`np.load(path)` reads it). Zarr is optional (`pip install gagen[zarr]`). Next to the
+file: `<stem>_fan.png` (Fig. 2 with every run's trajectories, the 5-95 % band, the median
+and the nominal run) and `<stem>_final.csv` (statistics of the final state).
+"""
+
+from __future__ import annotations
+
+import csv
+import fnmatch
+import logging
+import math
+import re
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..sim.batch import BatchPlan, blocks, prepare_batch, run_batch
+from .runs import load_dynamics, output_folder
+
+log = logging.getLogger(__name__)
+
+STATE_TARGETS = ("q0", "qd0", "kp", "kd", "target")
+ANGLE_TARGETS = ("q0", "qd0", "target")  # given in degrees for rotating joints
+BLOCK_BYTES = 256 * 2**20  # q, qd and tau of one block in memory
+CHUNK_BYTES = 4 * 2**20  # one Zarr chunk of q (and of qd, tau), before compression
+FAN_RUNS = 400  # runs drawn in the fan figure (the first ones: the draws are independent)
+FAILURES_KEPT = 1000  # messages of failed runs stored in the file's attributes
+_VARY = re.compile(r"^(?P<name>[^=\s]+)=(?P<value>.+)$")
+
+
+@dataclass(frozen=True)
+class Variation:
+    """One --vary: what it changes and how (a range, or a percentage of the default)."""
+
+    name: str  # a parameter pattern, or one of STATE_TARGETS
+    coordinate: str | None  # STATE_TARGETS only: one coordinate, or None for all
+    low: float | None = None
+    high: float | None = None
+    percent: float | None = None
+    text: str = ""
+
+
+def parse_variation(text: str) -> Variation:
+    """'NAME=LO:HI' or 'NAME=P%' (see the module docstring); ValueError if malformed."""
+    match = _VARY.match(text.replace(" ", ""))
+    if not match:
+        raise ValueError(f"--vary {text!r}: expected NAME=LO:HI or NAME=P%")
+    name, value = match["name"], match["value"].replace(" ", "")
+    coordinate = None
+    head, _, tail = name.partition(".")
+    if head in STATE_TARGETS:
+        name, coordinate = head, (tail or None)
+    try:
+        if value.endswith("%"):
+            percent = float(value[:-1])
+            if not (math.isfinite(percent) and 0 <= percent < 100):
+                raise ValueError
+            return Variation(name, coordinate, percent=percent, text=text)
+        low, high = (float(v) for v in value.split(":"))
+    except ValueError:
+        raise ValueError(f"--vary {text!r}: expected NAME=LO:HI (two numbers) or NAME=P% "
+                         "(0 <= P < 100)") from None
+    if not (math.isfinite(low) and math.isfinite(high) and low <= high):
+        raise ValueError(f"--vary {text!r}: LO and HI must be finite with LO <= HI")
+    return Variation(name, coordinate, low=low, high=high, text=text)
+
+
+@dataclass
+class SweepInputs:
+    """Every run's draws: the parameter table's varied columns, states and gains."""
+
+    p: dict[str, np.ndarray] = field(default_factory=dict)
+    q0: np.ndarray | None = None
+    qd0: np.ndarray | None = None
+    kp: np.ndarray | None = None
+    kd: np.ndarray | None = None
+    target: np.ndarray | None = None
+
+
+def draw_inputs(variations: list[Variation], runs: int, dyn, model, nominal, seed: int
+                ) -> SweepInputs:
+    """Draw each varied quantity for every run (uniformly, independently; in the order of
+    `variations`, from one generator seeded with `seed`)."""
+    rng = np.random.default_rng(seed)
+    out = SweepInputs()
+    defaults = dyn.parameters
+    for v in variations:
+        if v.name in STATE_TARGETS:
+            _draw_state(out, v, runs, dyn, model, nominal, rng)
+            continue
+        names = [k for k in defaults if fnmatch.fnmatchcase(k, v.name)]
+        if not names:
+            raise KeyError(f"--vary {v.text!r}: no parameter matches '{v.name}' "
+                           f"(parameters: {', '.join(defaults)})")
+        for name in names:
+            out.p[name] = _uniform(v, defaults[name], runs, rng)
+    return out
+
+
+def _draw_state(out: SweepInputs, v: Variation, runs: int, dyn, model, nominal, rng) -> None:
+    n = dyn.n
+    columns = list(range(n))
+    if v.coordinate is not None:
+        if v.coordinate not in dyn.coordinates:
+            raise KeyError(f"--vary {v.text!r}: no coordinate '{v.coordinate}' "
+                           f"(coordinates: {', '.join(dyn.coordinates)})")
+        columns = [dyn.coordinates.index(v.coordinate)]
+    base = {"q0": np.zeros(n), "qd0": np.zeros(n), "kp": nominal.c_spec(n)["kp"],
+            "kd": nominal.c_spec(n)["kd"], "target": nominal.c_spec(n)["target"]}[v.name]
+    current = getattr(out, v.name)
+    table = np.tile(base, (runs, 1)) if current is None else current
+    rotating = np.array([b.joint.type != "prismatic" for b in model.moving_bodies])
+    for k in columns:
+        if v.percent is not None and v.name in ANGLE_TARGETS:
+            raise ValueError(f"--vary {v.text!r}: give {v.name} as a range LO:HI (degrees)")
+        values = _uniform(v, base[k], runs, rng)
+        if v.percent is None and v.name in ANGLE_TARGETS and rotating[k]:
+            values = np.radians(values)
+        table[:, k] = values
+    setattr(out, v.name, table)
+
+
+def _uniform(v: Variation, default: float, runs: int, rng) -> np.ndarray:
+    if v.percent is not None:
+        return default * (1.0 + rng.uniform(-v.percent, v.percent, runs) / 100.0)
+    return rng.uniform(v.low, v.high, runs)
+
+
+# ------------------------------------------------------------------------------ stores
+
+
+class NpzStore:
+    """The whole sweep in memory, written by np.savez_compressed at the end."""
+
+    def __init__(self, path: Path, runs: int, t: np.ndarray, n: int, attrs: dict):
+        self.path, self.attrs = path, attrs
+        self.arrays = {name: np.empty((runs, t.size, n)) for name in ("q", "qd", "tau")}
+        self.arrays["t"] = t
+
+    def put(self, name: str, start: int, values: np.ndarray) -> None:
+        if name not in self.arrays:
+            runs = self.arrays["q"].shape[0]
+            self.arrays[name] = np.empty((runs,) + values.shape[1:], values.dtype)
+        self.arrays[name][start:start + len(values)] = values
+
+    def close(self, attrs: dict) -> None:
+        import json
+
+        meta = np.array(json.dumps({**self.attrs, **attrs}))
+        np.savez_compressed(self.path, attrs=meta, **self.arrays)
+
+
+class ZarrStore:
+    """A Zarr group: arrays chunked along the runs, written block by block."""
+
+    def __init__(self, path: Path, runs: int, t: np.ndarray, n: int, attrs: dict):
+        try:
+            import zarr
+        except ImportError:
+            raise ImportError("writing a .zarr store needs Zarr: pip install 'gagen[zarr]' "
+                              "(or write .npz: --out sweep.npz)") from None
+        if path.exists() and not (path / "zarr.json").exists():
+            raise FileExistsError(f"--out {path}: exists and is not a Zarr store; not "
+                                  "overwriting it")
+        self.group = zarr.open_group(str(path), mode="w")
+        self.group.attrs.update(attrs)
+        self.chunk = max(1, CHUNK_BYTES // (t.size * n * 8))
+        self.runs = runs
+        self.group.create_array("t", data=t)
+        for name in ("q", "qd", "tau"):
+            self.group.create_array(name, shape=(runs, t.size, n), dtype="f8",
+                                    chunks=(min(self.chunk, runs), t.size, n))
+
+    def put(self, name: str, start: int, values: np.ndarray) -> None:
+        if name not in self.group:
+            self.group.create_array(name, shape=(self.runs,) + values.shape[1:],
+                                    dtype=values.dtype,
+                                    chunks=(min(self.runs, 65536),) + values.shape[1:])
+        self.group[name][start:start + len(values)] = values
+
+    def close(self, attrs: dict) -> None:
+        self.group.attrs.update(attrs)
+
+
+def open_store(path: Path, runs: int, t: np.ndarray, n: int, attrs: dict):
+    """A store for `path` by its suffix: .zarr (streamed) or .npz (in memory)."""
+    suffix = path.suffix.lower()
+    if suffix == ".zarr":
+        return ZarrStore(path, runs, t, n, attrs)
+    if suffix == ".npz":
+        return NpzStore(path, runs, t, n, attrs)
+    raise ValueError(f"--out {path}: the file must end in .zarr or .npz")
+
+
+def default_out(model) -> Path:
+    """out/<model>/sweep.zarr, or sweep.npz when Zarr is not installed."""
+    import importlib.util
+
+    name = "sweep.zarr" if importlib.util.find_spec("zarr") else "sweep.npz"
+    return output_folder(None, model) / name
+
+
+# ------------------------------------------------------------------------------- sweep
+
+
+@dataclass
+class SweepRun:
+    """What `run_sweep` computed and wrote."""
+
+    model: object
+    runs: int
+    failed: int
+    final: np.ndarray  # (runs, n) final coordinates, NaN for failed runs
+    nominal_final: np.ndarray
+    seconds: float
+    files: list[Path] = field(default_factory=list)
+    statistics: list[dict] = field(default_factory=list)
+
+
+def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
+              duration: float = 5.0, points: int = 501, method: str = "dopri5",
+              rtol: float = 1e-6, atol: float = 1e-8, step: float = 1e-3,
+              threads: int | None = None, scheduler: str | None = None,
+              out: str | Path | None = None, cache_dir=None, plot: bool = True,
+              block_runs: int | None = None) -> SweepRun:
+    """Run `runs` simulations of `model` under the `simulate` command's controller, with the
+    --vary draws; stream them to `out` in blocks; plot the fan and write the statistics."""
+    from ..sim.controllers import PD, default_controller
+    from ..sim.simulate import simulate
+
+    parsed = [parse_variation(text) for text in variations]
+    model, dyn = load_dynamics(model, "compiled", cache_dir)
+    nominal = default_controller(dyn)
+    draws = draw_inputs(parsed, runs, dyn, model, nominal, seed)
+    controller = nominal
+    if draws.kp is not None or draws.kd is not None or draws.target is not None:
+        spec = nominal.c_spec(dyn.n)
+        controller = [PD(kp=_row(draws.kp, i, spec["kp"]), kd=_row(draws.kd, i, spec["kd"]),
+                         target=_row(draws.target, i, spec["target"]),
+                         gravity_compensation=nominal.gravity_compensation)
+                      for i in range(runs)]
+    options = {"h": step} if method == "rk4" else {}
+    span, t_eval = (0.0, duration), np.linspace(0.0, duration, points)
+    plan = prepare_batch(dyn, span, draws.q0 if draws.q0 is not None else np.zeros((runs, dyn.n)),
+                         draws.qd0, controller, draws.p or None, method, rtol, atol, t_eval,
+                         **options)
+    nominal_run = simulate(dyn, span, np.zeros(dyn.n), None, nominal, method=method, rtol=rtol,
+                           atol=atol, t_eval=t_eval, **options)
+    path = Path(out) if out else default_out(model)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    attrs = {"model": model.name, "coordinates": list(dyn.coordinates),
+             "parameters": list(dyn.parameters), "method": method, "rtol": rtol,
+             "atol": atol, "duration": duration, "runs": runs, "seed": seed,
+             "vary": [v.text for v in parsed], "controller": repr(nominal)}
+    store = open_store(path, runs, t_eval, dyn.n, attrs)
+    size = block_runs or _block_runs(runs, points, dyn.n, getattr(store, "chunk", 1))
+    log.info(f"{runs:,} runs of {duration:g} s with {method}, in {len(blocks(runs, size))} "
+             f"block(s) of up to {size:,} runs, to {path}")
+    start = time.perf_counter()
+    client = _client(scheduler)
+    try:
+        final, fan, failures = _run_blocks(dyn, plan, store, size, threads, client)
+    finally:
+        if client is not None:
+            client.close()
+    seconds = time.perf_counter() - start
+    failed = int(np.isnan(final).any(axis=1).sum())
+    store.close({"failed": failed, "failures": failures, "wall_time": seconds})
+    run = SweepRun(model, runs, failed, final, nominal_run.q[-1], seconds, [path])
+    run.statistics = final_statistics(run, dyn)
+    run.files.append(write_statistics(run, path.with_name(f"{path.stem}_final.csv")))
+    if plot:
+        from .figures import fig2_fan
+
+        log.info("plotting...")
+        run.files.append(fig2_fan(t_eval, fan, nominal_run.q, model,
+                                  path.with_name(f"{path.stem}_fan.png"), total=runs))
+    return run
+
+
+def _run_blocks(dyn, plan: BatchPlan, store, size: int, threads, client):
+    """Run the plan block by block into the store: (final q (N, n), NaN for failed runs;
+    the first FAN_RUNS runs' q; the messages of up to FAILURES_KEPT failed runs)."""
+    runs = plan.runs
+    progress = ProgressBar(runs)
+    final = np.full((runs, dyn.n), np.nan)
+    fan = None
+    failures: dict[str, str] = {}
+    for a, b in blocks(runs, size):
+        res = run_batch(dyn, plan.rows(a, b), threads=threads, client=client,
+                        progress=lambda done, _total, a=a: progress(a + done))
+        _store_block(store, plan, a, b, res)
+        final[a:b][res.ok] = res.q[res.ok, -1]
+        for i in np.flatnonzero(~res.ok)[: max(0, FAILURES_KEPT - len(failures))]:
+            failures[str(a + i)] = res.message[i]
+        if fan is None:
+            fan = res.q[:FAN_RUNS].copy()
+    return final, fan, failures
+
+
+def _row(table, i: int, default):
+    return default if table is None else table[i]
+
+
+def _client(scheduler: str | None):
+    if scheduler is None:
+        return None
+    try:
+        from distributed import Client
+    except ImportError:
+        raise ImportError("--scheduler needs Dask: pip install 'gagen[dask]'") from None
+    log.info(f"connecting to the Dask scheduler at {scheduler}...")
+    return Client(scheduler, timeout=30)
+
+
+def _block_runs(runs: int, points: int, n: int, chunk: int) -> int:
+    """Runs per block: q, qd, tau of a block within BLOCK_BYTES, a whole number of chunks."""
+    size = max(1, BLOCK_BYTES // (3 * points * n * 8))
+    return min(runs, max(chunk, size // chunk * chunk))
+
+
+def _store_block(store, plan: BatchPlan, a: int, b: int, res) -> None:
+    for name in ("q", "qd", "tau"):
+        store.put(name, a, getattr(res, name))
+    for name in ("status", "nfev", "steps", "rejected"):
+        store.put(name, a, getattr(res, name))
+    n = plan.y0.shape[1] // 2
+    store.put("q0", a, plan.y0[a:b, :n])
+    store.put("qd0", a, plan.y0[a:b, n:])
+    rows = plan.rows(a, b)
+    store.put("p", a, np.broadcast_to(rows.p, (b - a, plan.p.shape[1])))
+    for name in ("kp", "kd", "target"):
+        store.put(name, a, np.broadcast_to(rows.control[name], (b - a, n)))
+
+
+class ProgressBar:
+    """Progress as `gagen: sweep [####......] 40 % 400/1,000 runs, 2.1 s, ~3.2 s left` log
+    lines (stderr, hidden by --quiet): at most one a second, and the last."""
+
+    def __init__(self, total: int, every: float = 1.0, width: int = 24):
+        self.total, self.every, self.width = total, every, width
+        self.start = time.perf_counter()
+        self.shown = -math.inf
+        self.last = -1
+
+    def __call__(self, done: int) -> None:
+        now = time.perf_counter()
+        if done == self.last or (now - self.shown < self.every and done < self.total):
+            return
+        self.shown, self.last = now, done
+        elapsed = now - self.start
+        filled = int(self.width * done / max(self.total, 1))
+        left = f", ~{elapsed / done * (self.total - done):.1f} s left" \
+            if 0 < done < self.total else ""
+        log.info(f"sweep [{'#' * filled}{'.' * (self.width - filled)}] "
+                 f"{100 * done / max(self.total, 1):3.0f} % {done:,}/{self.total:,} runs, "
+                 f"{elapsed:.1f} s{left}")
+
+
+# -------------------------------------------------------------------------- statistics
+
+STAT_COLUMNS = ("coordinate", "unit", "nominal", "mean", "std", "min", "p5", "median", "p95",
+                "max")
+
+
+def final_statistics(run: SweepRun, dyn) -> list[dict]:
+    """Per coordinate: the final value's nominal, mean, std, min, percentiles and max over
+    the runs that reached the end (degrees for rotating joints, m for prismatic)."""
+    good = run.final[~np.isnan(run.final).any(axis=1)]
+    rows = []
+    for k, (name, body) in enumerate(zip(dyn.coordinates, run.model.moving_bodies)):
+        degrees = body.joint.type != "prismatic"
+        scale = 180.0 / math.pi if degrees else 1.0
+        x = good[:, k] * scale
+        row = {"coordinate": name, "unit": "deg" if degrees else "m",
+               "nominal": run.nominal_final[k] * scale}
+        if x.size:
+            p5, median, p95 = np.percentile(x, [5, 50, 95])
+            row.update(mean=x.mean(), std=x.std(ddof=1) if x.size > 1 else 0.0, min=x.min(),
+                       p5=p5, median=median, p95=p95, max=x.max())
+        rows.append(row)
+    return rows
+
+
+def write_statistics(run: SweepRun, path: Path) -> Path:
+    with path.open("w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(STAT_COLUMNS)
+        for row in run.statistics:
+            writer.writerow([row.get(c, "") if c in ("coordinate", "unit")
+                             else repr(float(row[c])) if c in row else "" for c in STAT_COLUMNS])
+    return path
+
+
+def print_sweep_report(run: SweepRun) -> None:
+    """Runs, failures, time and the final-state statistics, on stdout."""
+    rate = run.runs / run.seconds if run.seconds > 0 else math.inf
+    print(f"gagen: {run.runs:,} runs in {run.seconds:.2f} s ({rate:,.0f} runs/s); "
+          f"{run.failed:,} failed")
+    print(f"gagen: final state over the runs that reached the end "
+          f"({run.runs - run.failed:,}):")
+    print(f"  {'':<10}{'unit':>5}{'nominal':>10}{'mean':>10}{'std':>9}{'p5':>10}{'p95':>10}")
+    for row in run.statistics:
+        if "mean" not in row:
+            print(f"  {row['coordinate']:<10}{row['unit']:>5}{row['nominal']:>10.3f}   (no run)")
+            continue
+        print(f"  {row['coordinate']:<10}{row['unit']:>5}{row['nominal']:>10.3f}"
+              f"{row['mean']:>10.3f}{row['std']:>9.3f}{row['p5']:>10.3f}{row['p95']:>10.3f}")
+    for f in run.files:
+        print(f"gagen: wrote {f}")
