@@ -14,13 +14,17 @@ BACKENDS = ("compiled", "lambdify")
 _COMPILED_OPTIONS = ("cache_dir", "fast_math", "verbose", "portable", "derivation")
 
 
-def load(model="rrr", backend: str = "compiled", strict: bool = False, **options):
+def load(model="rrr", backend: str = "compiled", strict: bool = False,
+         floating_base: bool = False, **options):
     """Load the equations of motion of a model, with one API for every backend.
 
     `model` is a built-in name (`rrr`, `chain:N`), a model file (.yaml, .yml, .json), a
     .urdf file, an MJCF file (.xml, .mjcf; needs `pip install gagen[mjcf]`), or a
     `gagen.model.Model`. An inertia slightly off physical (CAD round-off) loads with a
-    `gagen.InertiaWarning`; `strict=True` refuses it. `backend` is "compiled" (generated C through
+    `gagen.InertiaWarning`; `strict=True` refuses it. `floating_base=True` lets a URDF's
+    root link move freely (Pinocchio's FreeFlyer: q = [x, y, z, qx, qy, qz, qw, joints],
+    velocities [linear, angular (both in the base frame), joints]; see `Dynamics.configuration`
+    and `Dynamics.coordinates`). `backend` is "compiled" (generated C through
     Cython, built on first use and cached) or "lambdify" (SymPy's lambdify, no compiler).
     Options of the compiled backend: `cache_dir`, `fast_math`, `verbose` (show the build's
     progress), `portable` (one version of the kernels for any CPU, no FMA clone). Both
@@ -38,41 +42,44 @@ def load(model="rrr", backend: str = "compiled", strict: bool = False, **options
         if options:
             raise TypeError(f"the lambdify backend takes only the option derivation, got "
                             f"{', '.join(options)}")
-        return _load_lambdify(model, derivation, strict)
+        return _load_lambdify(model, derivation, strict, floating_base)
     unknown = [key for key in options if key not in _COMPILED_OPTIONS]
     if unknown:
         raise TypeError(f"unknown option(s) {', '.join(unknown)} of the compiled backend "
                         f"(options: {', '.join(_COMPILED_OPTIONS)})")
-    return _load_compiled(model, strict=strict, **options)
+    return _load_compiled(model, strict=strict, floating_base=floating_base, **options)
 
 
-def _load_lambdify(model, derivation: str, strict: bool):
+def _load_lambdify(model, derivation: str, strict: bool, floating_base: bool):
     from .model.resolve import resolve_model
     from .runtime.lambdify import LambdifyDynamics
     from .symbolic.derivation import derive_equations
 
-    return LambdifyDynamics(derive_equations(resolve_model(model, strict), derivation))
+    return LambdifyDynamics(derive_equations(resolve_model(model, strict, floating_base),
+                                             derivation))
 
 
 def _load_compiled(model, cache_dir=None, fast_math: bool = False, verbose=None,
-                   portable: bool = False, derivation: str = "auto", strict: bool = False):
+                   portable: bool = False, derivation: str = "auto", strict: bool = False,
+                   floating_base: bool = False):
     from .build import cache
 
     digest = None
     if isinstance(model, (str, os.PathLike)):
         # strict is in the key: a model accepted with a warning must not skip a strict check
         options = [*cache.compile_flags(fast_math, portable), f"derivation={derivation}",
-                   f"strict={bool(strict)}"]
+                   f"strict={bool(strict)}"] + (["floating_base"] if floating_base else [])
         digest = cache.input_key(model, options)
         folder = Path(cache_dir) if cache_dir else cache.default_cache_dir()
         module = cache.index_lookup(folder, digest) if digest else None
         if module is not None:
             from .runtime.compiled import CompiledDynamics
 
-            return CompiledDynamics(module, model)
+            return CompiledDynamics(module, (model, floating_base))
     from .build.builder import load_compiled
     from .model.resolve import resolve_model
 
-    return load_compiled(resolve_model(model, strict), cache_dir=cache_dir, fast_math=fast_math,
-                         verbose=verbose, portable=portable, model_ref=model,
-                         input_digest=digest, derivation=derivation)
+    return load_compiled(resolve_model(model, strict, floating_base), cache_dir=cache_dir,
+                         fast_math=fast_math, verbose=verbose, portable=portable,
+                         model_ref=(model, floating_base), input_digest=digest,
+                         derivation=derivation)

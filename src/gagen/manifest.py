@@ -13,7 +13,6 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-
 # per second: how fast the rate of a floating joint's quaternion pulls it back onto the unit
 # sphere in simulations (gagen.runtime.manifold.configuration_rate; the compiled integrators
 # print this number)

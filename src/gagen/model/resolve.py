@@ -14,13 +14,21 @@ MODEL_SUFFIXES = (".yaml", ".yml", ".json")
 MJCF_SUFFIXES = (".xml", ".mjcf")
 
 
-def resolve_model(model: str | Path | Model, strict: bool = False) -> Model:
+def resolve_model(model: str | Path | Model, strict: bool = False,
+                  floating_base: bool = False) -> Model:
     """A Model from a built-in name (`rrr`, `chain:N`), a model file, a URDF, an MJCF file
     (.xml, .mjcf: through MuJoCo's compiler, `pip install gagen[mjcf]`), or a Model.
 
     An inertia slightly off physical (CAD round-off) loads with a
     `gagen.errors.InertiaWarning`; `strict=True` refuses it (also in a Model given as is).
+    `floating_base=True` lets a URDF's root link move freely (a floating joint to the
+    world); model files and MJCF declare their floating joints themselves (`type: floating`,
+    `<freejoint/>`).
     """
+    if floating_base and not str(model).lower().endswith(".urdf"):
+        raise ModelError(str(model), "floating_base", "floating_base=True applies to a URDF; "
+                         "a model file declares a joint `type: floating`, an MJCF file a "
+                         "<freejoint/>")
     if isinstance(model, Model):
         if strict:
             check_model_inertias(model, strict=True)
@@ -33,7 +41,7 @@ def resolve_model(model: str | Path | Model, strict: bool = False) -> Model:
     if suffix == ".urdf":
         from .urdf import load_urdf
 
-        return load_urdf(path, strict=strict)
+        return load_urdf(path, strict=strict, floating_base=floating_base)
     if suffix in MJCF_SUFFIXES:
         from .mjcf import load_mjcf
 

@@ -34,7 +34,9 @@ class Dynamics:
         if model is None:
             from ..model.resolve import resolve_model
 
-            model = self.__dict__["_model"] = resolve_model(self._model_ref)
+            ref, floating_base = self._model_ref if isinstance(self._model_ref, tuple) \
+                else (self._model_ref, False)
+            model = self.__dict__["_model"] = resolve_model(ref, floating_base=floating_base)
         return model
 
     @property

@@ -26,16 +26,16 @@ def as_states(n, *arrays, names: tuple[str, ...]) -> tuple[list[np.ndarray], boo
     sizes = tuple(n) if isinstance(n, (tuple, list)) else (n,) * len(arrays)
     out = []
     stacked_shape = None
-    for name, a, n in zip(names, arrays, sizes):
+    for name, a, size in zip(names, arrays, sizes):
         arr = as_float_array(a, name)
-        if arr.ndim == 1 and arr.shape[0] == n:
+        if arr.ndim == 1 and arr.shape[0] == size:
             pass
-        elif arr.ndim == 2 and arr.shape[1] == n:
+        elif arr.ndim == 2 and arr.shape[1] == size:
             if stacked_shape is not None and arr.shape[0] != stacked_shape:
                 raise ValueError(f"{name} has {arr.shape[0]} rows, other inputs have {stacked_shape}")
             stacked_shape = arr.shape[0]
         else:
-            raise ValueError(f"{name} must have shape ({n},) or (N, {n}); got {arr.shape}")
+            raise ValueError(f"{name} must have shape ({size},) or (N, {size}); got {arr.shape}")
         out.append(arr)
     stacked = stacked_shape is not None
     if stacked:

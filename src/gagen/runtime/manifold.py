@@ -27,7 +27,7 @@ def floating_slices(info) -> list[tuple[int, int]]:
     return info.floating_joints()
 
 
-def _velocity_to_configuration(info) -> tuple[np.ndarray, np.ndarray]:
+def plain_entries(info) -> tuple[np.ndarray, np.ndarray]:
     """Indices (in q, in v) of the coordinates that are plain numbers on a line."""
     floating = floating_slices(info)
     in_q = np.ones(info.nq, dtype=bool)
@@ -135,7 +135,7 @@ def log6(R: np.ndarray, p: np.ndarray) -> np.ndarray:
         signs = np.sign(vee[near_pi])
         signs[signs == 0] = 1
         w[near_pi] = axis * signs * theta[near_pi][..., None]
-    a, b, c = _exp_coefficients(theta)
+    a, b, _ = _exp_coefficients(theta)
     W = _hat(w)
     # V^-1 = I - W/2 + (1/t^2)(1 - a/(2b)) W^2
     t2 = np.where(small, 1.0, theta * theta)
@@ -148,7 +148,7 @@ def configuration_rate(info, q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """dq/dt at (q, v) (module docstring), for one state (nq,) or stacked (N, nq)."""
     q, v = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
     out = np.empty_like(q)
-    plain_q, plain_v = _velocity_to_configuration(info)
+    plain_q, plain_v = plain_entries(info)
     out[..., plain_q] = v[..., plain_v]
     for iq, iv in floating_slices(info):
         quat = q[..., iq + 3: iq + 7]
@@ -169,7 +169,7 @@ def integrate(info, q, v, dt=1.0) -> np.ndarray:
     """q ⊕ v dt, as Pinocchio's `integrate(model, q, v * dt)`: fresh array(s)."""
     q = np.array(q, dtype=float)
     step = np.asarray(v, dtype=float) * dt
-    plain_q, plain_v = _velocity_to_configuration(info)
+    plain_q, plain_v = plain_entries(info)
     out = q.copy() if q.ndim == step.ndim else np.broadcast_to(q, step.shape[:-1] + q.shape[-1:]).copy()
     out[..., plain_q] = out[..., plain_q] + step[..., plain_v]
     for iq, iv in floating_slices(info):
@@ -206,7 +206,7 @@ def difference(info, q0, q1) -> np.ndarray:
     q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
     shape = np.broadcast_shapes(q0.shape[:-1], q1.shape[:-1]) + (info.dof,)
     out = np.empty(shape)
-    plain_q, plain_v = _velocity_to_configuration(info)
+    plain_q, plain_v = plain_entries(info)
     out[..., plain_v] = q1[..., plain_q] - q0[..., plain_q]
     for iq, iv in floating_slices(info):
         R0, R1 = rotation(q0[..., iq + 3: iq + 7]), rotation(q1[..., iq + 3: iq + 7])
@@ -214,6 +214,20 @@ def difference(info, q0, q1) -> np.ndarray:
         dp = (R0T @ (q1[..., iq: iq + 3] - q0[..., iq: iq + 3])[..., None])[..., 0]
         out[..., iv: iv + 6] = log6(R0T @ R1, dp)
     return out
+
+
+def floating_velocities(info) -> np.ndarray:
+    """The indices in v of the floating joints' coordinates (no actuator drives them)."""
+    return np.array([iv + k for _, iv in floating_slices(info) for k in range(6)], dtype=int)
+
+
+def configuration_of(info, values) -> np.ndarray:
+    """The configuration with the plain coordinates at `values` (one per velocity
+    coordinate; a floating joint's entries ignored) and every quaternion the identity."""
+    q = neutral(info)
+    plain_q, plain_v = plain_entries(info)
+    q[plain_q] = np.asarray(values, dtype=float)[plain_v]
+    return q
 
 
 def neutral(info) -> np.ndarray:

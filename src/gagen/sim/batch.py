@@ -31,7 +31,9 @@ from .simulate import (
     checked_tolerances,
     compiled_settings,
     controller_spec,
+    initial_configuration,
     status_error,
+    unit_quaternions,
 )
 
 # Columns of the C batch's per-run statistics (CompiledBatch: gagen_ode_stats and status).
@@ -81,12 +83,12 @@ _CONTROL_VECTORS = ("kp", "kd", "target", "traj_q0", "traj_qf")
 def prepare_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: str = "dopri5",
                   rtol: float = 1e-6, atol=1e-8, t_eval=None, **options) -> BatchPlan:
     """Check a batch's inputs (the checks of `gagen.simulate`, per run) into a `BatchPlan`."""
-    n = dyn.n
+    n, nq = dyn.nv, dyn.nq
     t0, t1 = _pair(t_span)
     if not (isinstance(method, str) and method in COMPILED_METHODS):
         raise ValueError(f"simulate_batch runs gagen's compiled integrators: method must be "
                          f"one of {', '.join(COMPILED_METHODS)}, got {method!r}")
-    rtol, atol = checked_tolerances(method, rtol, atol, n)
+    rtol, atol = checked_tolerances(method, rtol, atol, nq + n)
     settings = compiled_settings(dyn, method, t0, t1, rtol, atol, t_eval, options)
     if not hasattr(dyn.module, "CompiledBatch"):
         raise ValueError(f"the compiled module of '{dyn.info.name}' was built by a gagen "
@@ -94,13 +96,16 @@ def prepare_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: st
     controllers = _controller_list(controller)
     runs = _run_count(q0=_rows_of(q0, 2), qd0=_rows_of(qd0, 2), p=_parameter_rows(p),
                       controller=None if controllers is None else len(controllers))
-    y0 = np.empty((runs, 2 * n))
-    y0[:, :n] = _states(q0, runs, n, "q0")
-    y0[:, n:] = _states(qd0, runs, n, "qd0")
+    y0 = np.empty((runs, nq + n))
+    y0[:, :nq] = _states(q0, runs, nq, "q0")
+    y0[:, nq:] = _states(qd0, runs, n, "qd0")
+    if nq != n:
+        y0[:, :nq] = [initial_configuration(dyn, row) for row in y0[:, :nq]]
     table = _parameter_table(dyn, p, runs)
-    specs = ([controller_spec(controller, method, n, "simulate_batch")] if controllers is None
-             else [controller_spec(c, method, n, "simulate_batch") for c in controllers])
-    return BatchPlan(settings, y0, table, _control_tables(specs, n))
+    specs = ([controller_spec(controller, method, n, "simulate_batch", dyn)]
+             if controllers is None
+             else [controller_spec(c, method, n, "simulate_batch", dyn) for c in controllers])
+    return BatchPlan(settings, y0, table, _control_tables(specs, n, nq))
 
 
 def _controller_list(controller) -> list | None:
@@ -193,14 +198,16 @@ def _parameter_table(dyn, p, runs: int) -> np.ndarray:
     return dyn.parameter_vector(p)[None, :]
 
 
-def _control_tables(specs: list[dict], n: int) -> dict[str, np.ndarray]:
+def _control_tables(specs: list[dict], n: int, nq: int) -> dict[str, np.ndarray]:
     """The controllers' C descriptions as tables, one row per spec (absent arrays: zeros,
-    which the C controller reads as it reads NULL)."""
+    which the C controller reads as it reads NULL); gains and targets have n entries, the
+    trajectory's configurations nq."""
     rows = len(specs)
     tables = {"kind": np.zeros((rows, 1), np.int32),
               "gravity_compensation": np.zeros((rows, 1), np.int32),
               "traj_Tp": np.ones((rows, 1))}
-    tables.update({name: np.zeros((rows, n)) for name in _CONTROL_VECTORS})
+    tables.update({name: np.zeros((rows, nq if name.startswith("traj_q") else n))
+                   for name in _CONTROL_VECTORS})
     for r, spec in enumerate(specs):
         tables["kind"][r] = spec["kind"]
         tables["gravity_compensation"][r] = bool(spec.get("gravity_compensation", False))
@@ -225,8 +232,9 @@ def default_threads() -> int:
 def run_plan(dyn, plan: BatchPlan, threads: int = 1, progress: Progress | None = None):
     """Run a plan here, over `threads` OS threads: (q, qd, tau, stats (N, 5) int64)."""
     s = plan.settings
-    runs, m, n = plan.runs, s.t_eval.size, dyn.n
-    q, qd, tau = (np.empty((runs, m, n)) for _ in range(3))
+    runs, m, n = plan.runs, s.t_eval.size, dyn.nv
+    q = np.empty((runs, m, dyn.nq))
+    qd, tau = (np.empty((runs, m, n)) for _ in range(2))
     stats = np.zeros((runs, 5), np.int64)
     c = plan.control
     batch = dyn.module.CompiledBatch(
@@ -234,7 +242,7 @@ def run_plan(dyn, plan: BatchPlan, threads: int = 1, progress: Progress | None =
         s.max_steps, s.h, plan.y0, plan.p, c["kind"], c["gravity_compensation"], c["kp"],
         c["kd"], c["target"], c["traj_q0"], c["traj_qf"], c["traj_Tp"], q, qd, tau, stats)
     _run_on_threads(batch, runs, threads, progress)
-    return q, qd, tau, stats
+    return unit_quaternions(dyn, q.reshape(-1, dyn.nq)).reshape(q.shape), qd, tau, stats
 
 
 def _run_on_threads(batch, runs: int, threads: int, progress: Progress | None) -> None:

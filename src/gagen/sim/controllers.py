@@ -104,8 +104,10 @@ class PD(Controller):
 
         tau = -kp (q - target) - kd qd  [+ g(q)],   g(q) = dyn.gravity(q) = inverse_dynamics(q, 0, 0)
 
-    `kp`, `kd` and `target` are scalars or per-joint arrays. g(q) is the torque that holds
-    the arm still at q, so with compensation the arm settles exactly at the target.
+    `kp`, `kd` and `target` are scalars or per-coordinate arrays (one entry per velocity
+    coordinate). g(q) is the torque that holds the arm still at q, so with compensation the
+    arm settles exactly at the target. A floating joint has no actuator: its torques are
+    zero, whatever its entries of kp, kd and target.
     """
 
     kind = KIND_PD
@@ -133,12 +135,24 @@ class PD(Controller):
         if self._n is not None:
             kp, kd, target = self._kp_n, self._kd_n, self._target_n
         else:
-            n = q.shape[-1]
+            n = qd.shape[-1]
             kp, kd = self._sized(self.kp, n, "kp"), self._sized(self.kd, n, "kd")
             target = self._sized(self.target, n, "target")
-        tau = -kp * (q - target) - kd * qd
+        floating = self._dyn is not None and self._dyn.nq != self._dyn.nv
+        if floating:
+            # the error of each joint; a floating joint has no actuator (its torque is 0)
+            from ..runtime.manifold import floating_velocities, plain_entries
+
+            plain_q, plain_v = plain_entries(self._dyn.info)
+            error = np.zeros(np.broadcast_shapes(qd.shape, target.shape))
+            error[..., plain_v] = q[..., plain_q] - target[plain_v]
+        else:
+            error = q - target
+        tau = -kp * error - kd * qd
         if self.gravity_compensation:
             tau += self._require_dynamics().gravity(q, self._p)
+        if floating:
+            tau[..., floating_velocities(self._dyn.info)] = 0.0
         return tau
 
     def c_spec(self, n: int) -> dict:
@@ -177,6 +191,10 @@ class ComputedTorque(Controller):
         self.kd = _gains(kd, "kd")
 
     def _check_size(self, n: int) -> None:
+        if self._dyn is not None and self._dyn.nq != self._dyn.nv:
+            raise ValueError("ComputedTorque tracks a trajectory of every coordinate; a "
+                             "floating joint has no actuator: use PD on the joints, or your "
+                             "own controller with a scipy method")
         self._kp_n = self._sized(self.kp, n, "kp")
         self._kd_n = self._sized(self.kd, n, "kd")
         tn = getattr(self.trajectory, "n", None)
@@ -248,6 +266,9 @@ def default_target(model) -> np.ndarray:
     info = model if isinstance(model, ModelInfo) else ModelInfo.from_model(model)
     out = []
     for j in info.joints:
+        if j.type == "floating":  # no actuator: its entries are not used
+            out += [0.0] * 6
+            continue
         value = DEFAULT_SLIDE_TARGET if j.type == "prismatic" else DEFAULT_ROTATION_TARGET
         lower, upper = (None, None) if j.type == "continuous" else (j.lower, j.upper)
         if not (lower is not None and upper is not None and lower >= upper):
@@ -270,8 +291,10 @@ def default_controller(dyn, p=None) -> PD:
     """
     if is_paper_robot(dyn.info):
         return paper_controller()
+    from ..runtime.manifold import configuration_of
+
     target = default_target(dyn.info)
-    samples = np.stack([np.zeros(dyn.n), 0.5 * target, target])
+    samples = np.stack([configuration_of(dyn.info, k * target) for k in (0.0, 0.5, 1.0)])
     M = np.asarray(dyn.mass_matrix(samples, p))
     inertia = np.maximum(np.diagonal(M, axis1=1, axis2=2).max(axis=0), 1e-6)
     kp = DEFAULT_OMEGA ** 2 * inertia

@@ -46,9 +46,9 @@ _STATUS = {
 
 @dataclass
 class SimulationResult:
-    """Samples of one simulation: t (m,), q, qd, tau (m, n), and how it went (`stats`).
+    """Samples of one simulation: t (m,), q (m, nq), qd and tau (m, nv), and how it went.
 
-    `stats` holds `method`, `backend`, `nfev` (right-hand side evaluations), `steps`
+    (nq = nv = n unless a joint floats: see `Dynamics.configuration`.) `stats` holds `method`, `backend`, `nfev` (right-hand side evaluations), `steps`
     (accepted steps), `rejected` (rejected step attempts, adaptive methods), `wall_time`
     (seconds, integration plus torques) and `controller` (its repr).
     """
@@ -59,15 +59,17 @@ class SimulationResult:
     tau: np.ndarray
     coordinates: list[str]
     stats: dict = field(default_factory=dict)
+    configuration: list[str] | None = None  # the names of q's entries, if not coordinates
 
     @property
     def n(self) -> int:
-        return self.q.shape[1]
+        return self.qd.shape[1]
 
     def columns(self) -> list[str]:
-        """CSV header: t, the coordinates, their rates (`<name>_d`), the torques (`tau_<name>`)."""
+        """CSV header: t, q's entries, the rates (`<name>_d`), the torques (`tau_<name>`)."""
         c = self.coordinates
-        return ["t"] + list(c) + [f"{name}_d" for name in c] + [f"tau_{name}" for name in c]
+        return (["t"] + list(self.configuration or c) + [f"{name}_d" for name in c]
+                + [f"tau_{name}" for name in c])
 
     def to_csv(self, path) -> Path:
         """Write t, q, qd, tau (one row per sample, SI units, radians) to a CSV file."""
@@ -170,7 +172,10 @@ def simulate(dyn, t_span, q0, qd0=None, controller=None, method: str = "RK45",
 
     dyn         a dynamics object from `gagen.load` (any backend for scipy methods).
     t_span      (t0, t1); t1 < t0 integrates backwards.
-    q0, qd0     initial coordinates and rates, shape (n,); qd0=None means at rest.
+    q0, qd0     initial configuration, shape (nq,), and rates, shape (nv,) (nq = nv = n
+                unless a joint floats); qd0=None means at rest. A floating joint's
+                quaternion is normalised; it stays on the unit sphere (dq/dt pulls it
+                back, gagen.runtime.manifold) and the returned q has unit quaternions.
     controller  None (no joint torques), a gagen controller (`PD`, `ComputedTorque`,
                 `paper_controller()`; bound to `dyn` and `p` here), or any callable
                 (t, q, qd) -> tau of shape (n,).
@@ -195,11 +200,10 @@ def simulate(dyn, t_span, q0, qd0=None, controller=None, method: str = "RK45",
     Returns a `SimulationResult` (fresh arrays). Raises `SingularMassMatrixError` if the
     mass matrix becomes singular, RuntimeError naming the cause if the integration fails.
     """
-    n = dyn.n
     t0, t1 = _pair(t_span)
-    q0 = _vector(q0, n, "q0")
-    qd0 = _vector(qd0, n, "qd0")
-    rtol, atol_arr = checked_tolerances(method, rtol, atol, n)
+    q0 = initial_configuration(dyn, _vector(q0, dyn.nq, "q0"))
+    qd0 = _vector(qd0, dyn.nv, "qd0")
+    rtol, atol_arr = checked_tolerances(method, rtol, atol, dyn.nq + dyn.nv)
     pvec = dyn.parameter_vector(p)
     if controller is not None and not callable(controller):
         raise TypeError("controller must be None, a gagen controller or a callable "
@@ -211,18 +215,31 @@ def simulate(dyn, t_span, q0, qd0=None, controller=None, method: str = "RK45",
                            pvec, options)
 
 
-def checked_tolerances(method, rtol, atol, n: int):
+def initial_configuration(dyn, q0: np.ndarray) -> np.ndarray:
+    """q0, with each floating joint's quaternion normalised (ValueError for a zero one)."""
+    if dyn.nq == dyn.nv:
+        return q0
+    from ..runtime.manifold import floating_slices, normalized
+
+    for iq, _ in floating_slices(dyn.info):
+        if not np.linalg.norm(q0[iq + 3: iq + 7]) > 1e-12:
+            raise ValueError(f"q0's quaternion {dyn.configuration[iq + 3: iq + 7]} is zero: "
+                             "the identity is (0, 0, 0, 1)")
+    return normalized(dyn.info, q0)
+
+
+def checked_tolerances(method, rtol, atol, size: int):
     """(rtol, atol) checked: the method a name or a solver class, rtol positive and finite,
-    atol nonnegative and finite (a float, or one entry per state)."""
+    atol nonnegative and finite (a float, or one entry per state: `size` = nq + nv)."""
     if not isinstance(method, str) and not isinstance(method, type):
         raise TypeError(f"method must be a string, got {type(method).__name__}")
     rtol = float(rtol)
     if not (rtol > 0 and math.isfinite(rtol)):
         raise ValueError(f"rtol must be a positive finite number, got {rtol}")
-    return rtol, _atol(atol, n)
+    return rtol, _atol(atol, size)
 
 
-def _atol(atol, n: int):
+def _atol(atol, size: int):
     """A nonnegative finite float, or an array of one such entry per state."""
     if isinstance(atol, (float, int)) and not isinstance(atol, bool) and 0 <= atol < math.inf:
         return float(atol)
@@ -230,9 +247,9 @@ def _atol(atol, n: int):
         arr = np.array(atol, dtype=float)
     except (TypeError, ValueError):
         arr = np.array([np.nan])
-    if arr.ndim > 1 or (arr.ndim == 1 and arr.size != 2 * n) \
+    if arr.ndim > 1 or (arr.ndim == 1 and arr.size != size) \
             or not ((arr >= 0) & np.isfinite(arr)).all():
-        raise ValueError(f"atol must be a nonnegative finite number or an array of {2 * n} "
+        raise ValueError(f"atol must be a nonnegative finite number or an array of {size} "
                          "such entries (q then qd)")
     return arr
 
@@ -264,7 +281,7 @@ def _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval
         if key in options:
             raise TypeError(f"option '{key}' is not supported by gagen.simulate")
     te = _time_grid(t_eval, t0, t1, allow_steps=True)
-    n = dyn.n
+    n, nq = dyn.nv, dyn.nq
     if controller is None:
         law = None
         vectorised = None
@@ -276,12 +293,13 @@ def _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval
         vectorised = None
     zero = np.zeros(n)
     fd = dyn.forward_dynamics
+    rate = _configuration_rate(dyn)
 
     def rhs(t, y):
-        q = y[:n]
-        qd = y[n:]
+        q = y[:nq]
+        qd = y[nq:]
         tau = zero if law is None else law(t, q, qd)
-        return np.concatenate((qd, fd(q, qd, tau, pvec)))
+        return np.concatenate((rate(q, qd), fd(q, qd, tau, pvec)))
 
     start = time.perf_counter()
     name = method if isinstance(method, str) else method.__name__
@@ -298,9 +316,9 @@ def _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval
                                f"[{t0:g}, {t1:g}])")
         t = np.array(sol.t, dtype=float)
         y = np.array(sol.y.T, dtype=float)
-    q, qd = y[:, :n].copy(), y[:, n:].copy()
+    q, qd = unit_quaternions(dyn, y[:, :nq].copy()), y[:, nq:].copy()
     if law is None:
-        tau = np.zeros_like(q)
+        tau = np.zeros_like(qd)
     elif vectorised is not None:
         tau = np.array(vectorised(t, q, qd), dtype=float).reshape(len(t), n)
     else:
@@ -312,7 +330,31 @@ def _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval
              "steps": int(steps), "rejected": None, "njev": int(sol.njev),
              "nlu": int(sol.nlu), "wall_time": wall, "controller": _name(controller),
              "message": sol.message}
-    return SimulationResult(t, q, qd, tau, list(dyn.coordinates), stats)
+    return _result(dyn, t, q, qd, tau, stats)
+
+
+def _result(dyn, t, q, qd, tau, stats) -> SimulationResult:
+    configuration = None if dyn.nq == dyn.nv else list(dyn.configuration)
+    return SimulationResult(t, q, qd, tau, list(dyn.coordinates), stats, configuration)
+
+
+def _configuration_rate(dyn):
+    """dq/dt as a function of (q, qd): qd itself unless a joint floats."""
+    if dyn.nq == dyn.nv:
+        return lambda q, qd: qd
+    from ..runtime.manifold import configuration_rate
+
+    return lambda q, qd: configuration_rate(dyn.info, q, qd)
+
+
+def unit_quaternions(dyn, q: np.ndarray) -> np.ndarray:
+    """Samples of q, (m, nq), with each floating joint's quaternion of unit norm (in place)."""
+    if dyn.nq == dyn.nv:
+        return q
+    from ..runtime.manifold import normalized
+
+    q[:] = normalized(dyn.info, q)
+    return q
 
 
 @dataclass
@@ -389,12 +431,15 @@ _PYTHON_CONTROLLER_ADVICE = {
 }
 
 
-def controller_spec(controller, method: str, n: int, caller: str = "simulate") -> dict:
+def controller_spec(controller, method: str, n: int, caller: str = "simulate",
+                    dyn=None) -> dict:
     """The keyword arguments of `CompiledSimulation` for a controller (None or a gagen
     controller with a C form); ValueError for a Python callable, which C cannot call."""
     if controller is None:
         return {"kind": 0}
     if isinstance(controller, Controller):
+        if dyn is not None:
+            controller.bind(dyn)  # checks that the law suits the model (a floating base)
         spec = controller.c_spec(n)  # checks the sizes against the model
         if spec is None:
             raise ValueError(f"{controller!r} has no C form (only an Eq11Trajectory runs in "
@@ -417,10 +462,11 @@ SUCCESS_MESSAGE = "The solver successfully reached the end of the integration in
 def _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval, pvec,
                        options) -> SimulationResult:
     settings = compiled_settings(dyn, method, t0, t1, rtol, atol, t_eval, options)
-    spec = controller_spec(controller, method, dyn.n)
+    spec = controller_spec(controller, method, dyn.n, dyn=dyn)
     start = time.perf_counter()
     sim = dyn.module.CompiledSimulation(dyn.kernels, pvec, **spec)
     q, qd, tau, status, info = settings.run(sim, q0, qd0)
+    q = unit_quaternions(dyn, q)
     te = settings.t_eval
     if status != 0:
         raise status_error(status, method, te, q, dyn.info.name)
@@ -430,7 +476,7 @@ def _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_e
              "rejected": info["nrejected"] if method == "dopri5" else None,
              "wall_time": wall, "controller": _name(controller),
              "message": SUCCESS_MESSAGE}
-    return SimulationResult(te, q, qd, tau, list(dyn.coordinates), stats)
+    return _result(dyn, te, q, qd, tau, stats)
 
 
 def _max_steps(value) -> int:
