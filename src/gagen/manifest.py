@@ -13,6 +13,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+# joint kinds in the tables of frame kinematics (manifest, frames.c)
+JOINT_KINDS = {"fixed": 0, "revolute": 1, "continuous": 1, "prismatic": 2, "floating": 3}
+
 # per second: how fast the rate of a floating joint's quaternion pulls it back onto the unit
 # sphere in simulations (gagen.runtime.manifold.configuration_rate; the compiled integrators
 # print this number)
@@ -52,6 +55,10 @@ class ModelInfo:
     joints: tuple[JointInfo, ...]
     parameters: tuple[tuple[str, float], ...]
     source: str = ""
+    # the tree, for frame kinematics: per body (parent body or -1, joint kind, its first
+    # velocity coordinate or -1); per named frame (name, body or -1 for the world)
+    bodies: tuple[tuple[int, int, int], ...] = ()
+    frames: tuple[tuple[str, int], ...] = ()
 
     @property
     def coordinates(self) -> list[str]:
@@ -94,7 +101,9 @@ class ModelInfo:
         """The manifest as hex digits of UTF-8 JSON, safe to print into any source file."""
         data = {"name": self.name, "source": self.source,
                 "joints": [asdict(joint) for joint in self.joints],
-                "parameters": [list(item) for item in self.parameters]}
+                "parameters": [list(item) for item in self.parameters],
+                "bodies": [list(item) for item in self.bodies],
+                "frames": [list(item) for item in self.frames]}
         return json.dumps(data, sort_keys=True, ensure_ascii=False).encode().hex()
 
     @classmethod
@@ -102,7 +111,9 @@ class ModelInfo:
         data = json.loads(bytes.fromhex(text).decode())
         return cls(name=data["name"], source=data["source"],
                    joints=tuple(JointInfo(**joint) for joint in data["joints"]),
-                   parameters=tuple((name, float(value)) for name, value in data["parameters"]))
+                   parameters=tuple((name, float(value)) for name, value in data["parameters"]),
+                   bodies=tuple(tuple(int(x) for x in b) for b in data.get("bodies", ())),
+                   frames=tuple((str(name), int(b)) for name, b in data.get("frames", ())))
 
     @classmethod
     def from_model(cls, model) -> ModelInfo:
@@ -115,6 +126,12 @@ class ModelInfo:
             joints.append(JointInfo(body.joint.name, body.joint.type,
                                     **{k: None if v is None else float(v)
                                        for k, v in values.items()}))
+        index = {b.name: k for k, b in enumerate(model.bodies)}
+        starts = model.indices()
+        bodies = tuple((index.get(b.parent, -1), JOINT_KINDS[b.joint.type],
+                        starts.get(b.name, (0, -1))[1]) for b in model.bodies)
+        frames = tuple((f.name, index.get(f.body, -1)) for f in model.frames)
         return cls(name=model.name, joints=tuple(joints), source=str(model.source or ""),
                    parameters=tuple((name, float(value))
-                                    for name, value in model.parameters.items()))
+                                    for name, value in model.parameters.items()),
+                   bodies=bodies, frames=frames)

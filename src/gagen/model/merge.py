@@ -11,7 +11,7 @@ from dataclasses import dataclass, field, replace
 
 import sympy as sp
 
-from .model import IDENTITY, WORLD, ZERO3, Body, Model
+from .model import IDENTITY, WORLD, ZERO3, Body, Frame, Model
 
 _ZERO33 = sp.ImmutableMatrix(sp.zeros(3, 3))
 
@@ -29,11 +29,13 @@ def merge_fixed_joints(model: Model) -> Model:
 
     Each fixed body's mass, mass centre and central inertia are moved into the frame of the
     nearest moving ancestor and combined with it (parallel-axis theorem). Bodies welded to
-    the world never move, so they are dropped. Body order stays parents-first.
+    the world never move, so they are dropped. Body order stays parents-first. Each merged
+    body and its joint remain as named frames (`Model.extra_frames`) of their host.
     """
     if all(b.joint.moves for b in model.bodies):
         return model
     hosts: dict[str, _Host] = {}
+    frames: list[Frame] = []
     # Where each body's frame sits: (host name, position, rotation) in the host's frame.
     placement: dict[str, tuple[str, sp.Matrix, sp.Matrix]] = {WORLD: (WORLD, ZERO3, IDENTITY)}
     order: list[str] = []
@@ -52,11 +54,17 @@ def merge_fixed_joints(model: Model) -> Model:
             placement[body.name] = (body.name, ZERO3, IDENTITY)
         else:
             placement[body.name] = (host, xyz, rot)
+            # the merged link and its joint stay named frames, fixed to the host
+            frames += [Frame(body.name, host, xyz, rot, "link"),
+                       Frame(body.joint.name, host, xyz, rot, "joint")]
             if host != WORLD and not _massless(body):
                 hosts[host].pieces.append(_piece_in_host(body, xyz, rot))
     bodies = tuple(_combined(hosts[name]) for name in order)
-    return Model(name=model.name, bodies=bodies, parameters=model.parameters,
-                 gravity=model.gravity, source=model.source, description=model.description)
+    return replace(model, bodies=bodies, extra_frames=tuple(frames) + tuple(
+        replace(f, body=placement[f.body][0],
+                xyz=sp.ImmutableMatrix(placement[f.body][1] + placement[f.body][2] * f.xyz),
+                rotation=sp.ImmutableMatrix(placement[f.body][2] * f.rotation))
+        for f in model.extra_frames))
 
 
 def _massless(body: Body) -> bool:

@@ -159,8 +159,24 @@ class Body:
 
 
 @dataclass(frozen=True)
+class Frame:
+    """A named frame fixed to a body (or to the world): a link or a joint of the
+    description whose body was merged into another (fixed joints), or welded to the world.
+    `xyz` and `rotation` place it in the body's frame (rotation: its axes' components)."""
+
+    name: str
+    body: str
+    xyz: sp.ImmutableMatrix = ZERO3
+    rotation: sp.ImmutableMatrix = IDENTITY
+    kind: str = "link"  # or "joint"
+
+
+@dataclass(frozen=True)
 class Model:
-    """A validated tree of bodies. Bodies are stored parents first."""
+    """A validated tree of bodies. Bodies are stored parents first.
+
+    `extra_frames` are the frames that are not a body's own: links merged into a body by
+    fixed joints, their joints, links welded to the world. `frames` lists all of them."""
 
     name: str
     bodies: tuple[Body, ...]
@@ -168,6 +184,7 @@ class Model:
     gravity: sp.ImmutableMatrix
     source: str = "<model>"
     description: str = ""
+    extra_frames: tuple[Frame, ...] = ()
 
     def __post_init__(self):
         object.__setattr__(self, "bodies", tuple(_tree_order(self.bodies, self.source)))
@@ -209,6 +226,19 @@ class Model:
         """Whether some body moves freely (a floating joint)."""
         return any(b.joint.floating for b in self.bodies)
 
+    @property
+    def frames(self) -> list[Frame]:
+        """Every named frame: each body's own (its link, and its joint, whose frame is the
+        body's: gagen's body frames are joint frames), then `extra_frames`. A name is
+        listed once (the first frame with it)."""
+        frames: dict[str, Frame] = {}
+        for b in self.bodies:
+            for name, kind in ((b.name, "link"), (b.joint.name, "joint")):
+                frames.setdefault(name, Frame(name, b.name, kind=kind))
+        for f in self.extra_frames:
+            frames.setdefault(f.name, f)
+        return list(frames.values())
+
     def body(self, name: str) -> Body:
         """The body called `name`."""
         for b in self.bodies:
@@ -247,6 +277,8 @@ class Model:
                     ]
                 )
             )
+        lines += ["frame " + "|".join([f.name, f.body, f.kind, sp.srepr(f.xyz),
+                                        sp.srepr(f.rotation)]) for f in self.extra_frames]
         return "\n".join(lines)
 
     def content_hash(self) -> str:

@@ -32,8 +32,7 @@ def parameterize_mass_properties(model: Model) -> Model:
             continue
         parameters.update(_body_parameters(body))
         bodies.append(_symbolic_body(body))
-    return Model(name=model.name, bodies=tuple(bodies), parameters=parameters,
-                 gravity=model.gravity, source=model.source, description=model.description)
+    return replace(model, bodies=tuple(bodies), parameters=parameters)
 
 
 def _symbolic_body(body: Body) -> Body:

@@ -25,6 +25,7 @@ from .model import (
     WORLD,
     ZERO3,
     Body,
+    Frame,
     Joint,
     Limits,
     Model,
@@ -97,7 +98,9 @@ def parse_urdf_text(text: str | bytes, source: str = "<urdf>", strict: bool = Fa
     g = sp.Symbol("g")
     with naming(*_LINK_INERTIA):  # before merging: a message names the link, welded or not
         model = Model(name=_robot_name(robot, source), bodies=tuple(bodies),
-                      parameters={"g": GRAVITY}, gravity=vector([0, 0, -g]), source=source)
+                      parameters={"g": GRAVITY}, gravity=vector([0, 0, -g]), source=source,
+                      # a root link welded to the world is a frame of it
+                      extra_frames=() if floating_base else (Frame(root, WORLD),))
     check_model_inertias(model, strict, *_LINK_INERTIA)
     return parameterize_mass_properties(merge_fixed_joints(model))
 

@@ -122,6 +122,61 @@ class Dynamics:
 
         return neutral(self.info)
 
+    # --- frames ------------------------------------------------------------------------------
+
+    @property
+    def frames(self) -> list[str]:
+        """Every frame's name: each link of the description (those merged into a body by
+        fixed joints too, e.g. a tool flange or a foot) and each joint."""
+        return [name for name, _ in self.info.frames]
+
+    def frame_placement(self, q, frame, p=None) -> tuple[np.ndarray, np.ndarray]:
+        """(R, p): the frame's orientation (world components of its axes, (3, 3)) and its
+        origin in the world (3,); stacked q gives (N, 3, 3) and (N, 3). `frame` is a name of
+        `frames` or an index into it."""
+        from .frames import frame_index, pose
+
+        X, F, _ = self._frame_data(q, p)
+        return pose(self.info, X, F, frame_index(self.info, frame))
+
+    def frame_jacobian(self, q, frame, p=None) -> np.ndarray:
+        """The frame's Jacobian, (6, nv) or (N, 6, nv), in Pinocchio's LOCAL_WORLD_ALIGNED
+        convention: rows 0-2 map qd to the velocity of the frame's origin, rows 3-5 to its
+        angular velocity, both in world axes."""
+        from .frames import frame_index, jacobian
+
+        X, F, _ = self._frame_data(q, p)
+        return jacobian(self.info, X, F, frame_index(self.info, frame), self.nv)
+
+    def frame_velocity(self, q, qd, frame, p=None) -> np.ndarray:
+        """The frame's velocity, (6,) or (N, 6): its origin's linear velocity, then its
+        angular velocity, in world axes (= frame_jacobian(q, frame) @ qd)."""
+        (q, qd), _ = as_states(self._sizes[:2], q, qd, names=("q", "qd"))
+        J = self.frame_jacobian(q, frame, p)
+        return np.einsum("...ij,...j->...i", J, qd)
+
+    def _frame_data(self, q, p):
+        """(placements X, frame offsets F, stacked?) at q (see gagen.runtime.frames)."""
+        (q,), stacked = as_states(self.nq, q, names=("q",))
+        return self._placements(q, p), self._frame_offsets(p), stacked
+
+    def _placements(self, q, p) -> np.ndarray:
+        raise NotImplementedError
+
+    def _frame_offsets(self, p) -> np.ndarray:
+        raise NotImplementedError
+
+    def external_forces(self, q, fext, p=None) -> np.ndarray:
+        """The generalised force, (nv,) or (N, nv), of external wrenches fext = {frame: w},
+        w = (fx, fy, fz, tx, ty, tz) in world axes at the frame's origin ((6,) or one row
+        per stacked state): sum of J_frame^T w. forward_dynamics and inverse_dynamics take
+        `fext=` and add or subtract it."""
+        from .frames import external_wrenches, generalized_forces
+
+        X, F, stacked = self._frame_data(q, p)
+        wrenches = external_wrenches(self.info, fext, X.shape[0] if stacked else None)
+        return generalized_forces(self.info, X, F, wrenches, self.nv)
+
     # --- the dynamics (each backend implements these) --------------------------------------
 
     def mass_matrix(self, q, p=None) -> np.ndarray:
@@ -132,15 +187,19 @@ class Dynamics:
         """F(q, q̇, τ) such that M(q) q̈ = F: shape (n,) or (N, n)."""
         raise NotImplementedError
 
-    def forward_dynamics(self, q, qd, tau, p=None) -> np.ndarray:
+    def forward_dynamics(self, q, qd, tau, p=None, fext=None) -> np.ndarray:
         """q̈ = M(q)⁻¹ F(q, q̇, τ): shape (n,) or (N, n).
 
+        `fext` = {frame: w} adds external wrenches w = (force, torque) in world axes at the
+        frames' origins (a foot's contact, a payload): τ + Σ J_frameᵀ w (`external_forces`).
         Raises SingularMassMatrixError when M(q) is not positive definite (zero or negative
         masses or inertias), NonFiniteStateError when q holds NaN or inf."""
         raise NotImplementedError
 
-    def inverse_dynamics(self, q, qd, qdd, p=None) -> np.ndarray:
-        """The joint torques (forces for prismatic joints) τ that give q̈: shape (n,) or (N, n)."""
+    def inverse_dynamics(self, q, qd, qdd, p=None, fext=None) -> np.ndarray:
+        """The joint torques (forces for prismatic joints) τ that give q̈: shape (n,) or
+        (N, n). With `fext` = {frame: w} (as in forward_dynamics) the torques that give q̈
+        while those wrenches act: τ − Σ J_frameᵀ w."""
         raise NotImplementedError
 
     def gravity(self, q, p=None) -> np.ndarray:

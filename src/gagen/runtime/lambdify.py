@@ -40,6 +40,9 @@ class LambdifyDynamics(Dynamics):
         self._inverse = self._lambdify([c.q, c.qd, c.qdd, p], outs["inverse_dynamics"])
         self._energy = self._lambdify([c.q, c.qd, p], outs["energy"])
         self._gravity = self._lambdify([c.q, p], outs["gravity"])
+        if "placements" in outs:
+            self._placement_function = self._lambdify([c.q, p], outs["placements"])
+            self._offset_function = self._lambdify([p], outs["frame_offsets"])
         n = self.n
         self._lower = np.tril_indices(n)
 
@@ -82,13 +85,23 @@ class LambdifyDynamics(Dynamics):
         states, stacked = as_states(self._sizes, q, qd, tau, names=("q", "qd", "tau"))
         return self._call(self._forcing, states, p, stacked)
 
-    def forward_dynamics(self, q, qd, tau, p=None) -> np.ndarray:
+    def forward_dynamics(self, q, qd, tau, p=None, fext=None) -> np.ndarray:
+        if fext is not None:
+            tau = np.asarray(tau, dtype=float) + self.external_forces(q, fext, p)
         L = _cholesky(self.mass_matrix(q, p))
         return _cholesky_solve(L, self.forcing(q, qd, tau, p)[..., None])[..., 0]
 
-    def inverse_dynamics(self, q, qd, qdd, p=None) -> np.ndarray:
+    def inverse_dynamics(self, q, qd, qdd, p=None, fext=None) -> np.ndarray:
         states, stacked = as_states(self._sizes, q, qd, qdd, names=("q", "qd", "qdd"))
-        return self._call(self._inverse, states, p, stacked)
+        tau = self._call(self._inverse, states, p, stacked)
+        return tau if fext is None else tau - self.external_forces(q, fext, p)
+
+    def _placements(self, q, p) -> np.ndarray:
+        stacked = q.ndim == 2
+        return self._call(self._placement_function, [q], p, stacked)
+
+    def _frame_offsets(self, p) -> np.ndarray:
+        return np.array(self._offset_function(*self.parameter_vector(p)), dtype=float)
 
     def gravity(self, q, p=None) -> np.ndarray:
         """The gravity torques g(q) = inverse_dynamics(q, 0, 0)."""

@@ -15,6 +15,7 @@ import sympy as sp
 
 from ..model.model import Model
 from .aba import forward_dynamics_aba_after
+from .frames import add_frame_kinematics
 from .gibbs_appell import Equations, derive
 from .recursive import derive_recursive
 
@@ -45,8 +46,10 @@ def derive_equations(model: Model, derivation: str = "auto") -> Equations:
     (`Equations.forward_dynamics`), as a continuation of the same program: O(n) where
     M \\ forcing costs O(n * depth) for M and O(n^3) for its factorisation."""
     if derivation_for(model, derivation) == "recursive":
-        return with_articulated_body(derive_recursive(model))
-    return derive(model)
+        eqs = with_articulated_body(derive_recursive(model))
+    else:
+        eqs = derive(model)
+    return add_frame_kinematics(eqs)
 
 
 def with_articulated_body(eqs: Equations) -> Equations:

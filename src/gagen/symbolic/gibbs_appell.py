@@ -56,6 +56,9 @@ class Equations:
     forward_dynamics: sp.Matrix | None = None
     pivots: list[sp.Expr] | None = None
     derivation: str = "gibbs-appell"  # or "recursive" (symbolic/derivation.py)
+    # where the bodies are in the world and the frames on their bodies (symbolic/frames.py)
+    placements: list[sp.Expr] | None = None
+    frame_offsets: list[sp.Expr] | None = None
 
     @property
     def n(self) -> int:
@@ -91,6 +94,9 @@ class Equations:
         if self.forward_dynamics is not None:
             outputs["forward_dynamics"] = list(self.forward_dynamics)
             outputs["pivots"] = list(self.pivots)
+        if self.placements is not None:
+            outputs["placements"] = list(self.placements)
+            outputs["frame_offsets"] = list(self.frame_offsets)
         return outputs
 
 

@@ -1,0 +1,62 @@
+"""Where every body is in the world, and where every named frame is on its body.
+
+`add_frame_kinematics(eqs)` continues the program of an `Equations` with two outputs:
+
+- `placements`: per body (in the model's order) 15 values in q and the parameters: its
+  frame's orientation R (the world components of its axes, row-major 3x3), its origin p in
+  the world, and its joint's axis in the world (R s; zero for a fixed or floating joint).
+  R = R_parent R_joint and p = p_parent + R_parent d_joint, one body at a time, each entry
+  named: the size is O(bodies).
+- `frame_offsets`: per frame of `Model.frames` 12 values in the parameters only: the
+  frame's axes and origin in its body's frame (a merged link's placement; the identity for
+  a body's own frames; a frame welded to the world is placed in the world).
+
+From these, the runtime places any frame (R_body R_f, p_body + R_body p_f) and writes its
+Jacobian in Pinocchio's LOCAL_WORLD_ALIGNED convention (linear velocity of the frame's
+origin, then angular velocity, both in world axes), walking the ancestors' joints:
+
+    revolute (world axis a at o):  [a x (p_f - o); a]        prismatic:  [a; 0]
+    floating (R_b, o_b): linear r: [R_b e_r; 0],  angular r: [(R_b e_r) x (p_f - o_b); R_b e_r]
+
+(gagen.runtime.frames in NumPy, codegen/templates/model/frames.c.j2 in C.)
+"""
+
+from __future__ import annotations
+
+import sympy as sp
+
+from ..model.model import WORLD
+from .differentiate import recorder_after
+from .gibbs_appell import Equations
+from .kinematics import joint_transform, unit_axis
+
+PLACEMENT_SIZE = 15  # R (9), p (3), the joint's axis in the world (3)
+OFFSET_SIZE = 12  # R (9), p (3)
+
+
+def add_frame_kinematics(eqs: Equations) -> Equations:
+    """`eqs` with the outputs `placements` and `frame_offsets` (module docstring)."""
+    model = eqs.model
+    rec = recorder_after(eqs.intermediates)
+    index = model.indices()
+    world = (sp.eye(3), sp.zeros(3, 1))
+    placed: dict[str, tuple[sp.Matrix, sp.Matrix]] = {WORLD: world}
+    placements: list[sp.Expr] = []
+    for body in model.bodies:
+        joint = body.joint
+        iq = index.get(body.name, (0, 0))[0]
+        R_j, d_j = joint_transform(joint, eqs.coords.q[iq: iq + joint.nq], rec)
+        R_p, p_p = placed[body.parent]
+        R = (R_p * R_j).applyfunc(rec.name)
+        p = rec.vec(p_p + R_p * d_j)
+        axis = rec.vec(R * unit_axis(joint.axis)) if joint.moves and not joint.floating \
+            else sp.zeros(3, 1)
+        placed[body.name] = (R, p)
+        placements += [*R, *p, *axis]
+    offsets: list[sp.Expr] = []
+    for frame in model.frames:
+        offsets += [*sp.Matrix(frame.rotation), *sp.Matrix(frame.xyz)]
+    eqs.intermediates = rec.definitions
+    eqs.placements = placements
+    eqs.frame_offsets = [sp.sympify(e) for e in offsets]
+    return eqs
