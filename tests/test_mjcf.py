@@ -220,13 +220,17 @@ FREE_BODY = f'<body name="drone"><freejoint/>{MASS}</body>'
 BALL_BODY = f'<body pos="0 0 0.1"><joint name="shoulder" type="ball"/>{MASS}</body>'
 
 
-@pytest.mark.parametrize("inner, body_inner, reason", [
-    (FREE_BODY, "", r"body 'drone': has a free joint: floating bases are not supported yet"),
-    ("", BALL_BODY, r"joint 'shoulder': ball joints are not supported; model it as three"),
-], ids=["free", "ball"])
-def test_free_and_ball_joints_are_refused_naming_them(tmp_path, inner, body_inner, reason):
-    with pytest.raises(ModelError, match=reason):
-        load_mjcf(write(tmp_path, "m.xml", mjcf(inner=inner, body_inner=body_inner)))
+def test_ball_joints_are_refused_naming_them(tmp_path):
+    with pytest.raises(ModelError, match=r"joint 'shoulder': ball joints are not supported; "
+                       "model it as three"):
+        load_mjcf(write(tmp_path, "m.xml", mjcf(body_inner=BALL_BODY)))
+
+
+def test_a_free_joint_is_a_floating_joint(tmp_path):
+    model = load_mjcf(write(tmp_path, "m.xml", mjcf(inner=FREE_BODY)))
+    body = model.body("drone")
+    assert body.joint.floating and body.parent == "world"
+    assert model.nq == model.nv + 1
 
 
 def test_nothing_moves_is_refused(tmp_path):

@@ -213,6 +213,11 @@ def _body_chain(mj, b: int, names: _Names, parent: tuple[str, np.ndarray],
         joint = Joint(name=f"{name}_fixed", type="fixed", origin_xyz=_vector(xyz),
                       origin_rotation=_rotation(rotation), axis=vector([0, 0, 1]))
         return [Body(name=name, parent=parent_name, joint=joint)], np.zeros(3)
+    if int(mj.jnt_type[first]) == _FREE:
+        # MuJoCo's free joint: the body's placement is its configuration (the body's pos
+        # and quat in the file are only its initial qpos), about the body's origin
+        joint = Joint(name=names.joint(first), type="floating")
+        return [Body(name=name, parent=parent_name, joint=joint)], np.zeros(3)
     chain: list[Body] = []
     anchor = np.zeros(3)
     for k, j in enumerate(range(first, first + count)):
@@ -233,12 +238,12 @@ def _body_chain(mj, b: int, names: _Names, parent: tuple[str, np.ndarray],
 
 
 def _refuse_unsupported(mj, j: int, body: str, names: _Names, source: str) -> None:
-    """Free and ball joints: the one place that knows which MuJoCo joints gagen cannot
-    model yet (a free joint becomes the floating base once gagen has one)."""
+    """Ball joints, and a free joint after another joint: the one place that knows which
+    MuJoCo joints gagen cannot model."""
     jtype = int(mj.jnt_type[j])
-    if jtype == _FREE:
-        raise ModelError(source, f"body {quote(body)}", "has a free joint: floating bases "
-                         "are not supported yet")
+    if jtype == _FREE:  # MuJoCo allows a free joint only as a body's only joint
+        raise ModelError(source, f"body {quote(body)}", "has a free joint after another "
+                         "joint")
     if jtype == _BALL:
         raise ModelError(source, f"joint {quote(names.joint(j))}", "ball joints are not "
                          "supported; model it as three hinge joints with orthogonal axes "

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import SingularMassMatrixError  # noqa: F401 (re-exported)
 from ..manifest import ModelInfo
-from .inputs import as_states, parameter_array  # noqa: F401 (as_states re-exported)
+from .inputs import as_states, parameter_array
 
 
 class Dynamics:

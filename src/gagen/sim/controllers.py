@@ -102,42 +102,48 @@ class Controller:
 class PD(Controller):
     """Joint-space PD toward a fixed target, optionally with gravity compensation:
 
-        tau = -kp (q - target) - kd qd  [+ g(q)],   g(q) = dyn.gravity(q) = inverse_dynamics(q, 0, 0)
+        tau = feedforward - kp (q - target) - kd qd  [+ g(q)],   g(q) = dyn.gravity(q)
 
     `kp`, `kd` and `target` are scalars or per-coordinate arrays (one entry per velocity
     coordinate). g(q) is the torque that holds the arm still at q, so with compensation the
-    arm settles exactly at the target. A floating joint has no actuator: its torques are
-    zero, whatever its entries of kp, kd and target.
+    arm settles exactly at the target. `feedforward` is a constant torque added to the law
+    (e.g. what holds a robot still while known wrenches act on it). A floating joint has no
+    actuator: its torques are zero, whatever its entries of kp, kd, target and feedforward.
     """
 
     kind = KIND_PD
 
-    def __init__(self, kp, kd, target=0.0, gravity_compensation: bool = False):
+    def __init__(self, kp, kd, target=0.0, gravity_compensation: bool = False,
+                 feedforward=0.0):
         super().__init__()
         self.kp = _gains(kp, "kp")
         self.kd = _gains(kd, "kd")
         self.target = _gains(target, "target")
+        self.feedforward = _gains(feedforward, "feedforward")
         self.gravity_compensation = bool(gravity_compensation)
         self.needs_dynamics = self.gravity_compensation
-        sizes = {a.size for a in (self.kp, self.kd, self.target)} - {1}
+        sizes = {a.size for a in (self.kp, self.kd, self.target, self.feedforward)} - {1}
         if len(sizes) > 1:
-            raise ValueError(f"kp, kd and target have different lengths: "
-                             f"{self.kp.size}, {self.kd.size}, {self.target.size}")
+            raise ValueError(f"kp, kd, target and feedforward have different lengths: "
+                             f"{self.kp.size}, {self.kd.size}, {self.target.size}, "
+                             f"{self.feedforward.size}")
 
     def _check_size(self, n: int) -> None:
         self._kp_n = self._sized(self.kp, n, "kp")
         self._kd_n = self._sized(self.kd, n, "kd")
         self._target_n = self._sized(self.target, n, "target")
+        self._ff_n = self._sized(self.feedforward, n, "feedforward")
 
     def __call__(self, t, q, qd) -> np.ndarray:
         q = np.asarray(q, dtype=float)
         qd = np.asarray(qd, dtype=float)
         if self._n is not None:
-            kp, kd, target = self._kp_n, self._kd_n, self._target_n
+            kp, kd, target, ff = self._kp_n, self._kd_n, self._target_n, self._ff_n
         else:
             n = qd.shape[-1]
             kp, kd = self._sized(self.kp, n, "kp"), self._sized(self.kd, n, "kd")
             target = self._sized(self.target, n, "target")
+            ff = self._sized(self.feedforward, n, "feedforward")
         floating = self._dyn is not None and self._dyn.nq != self._dyn.nv
         if floating:
             # the error of each joint; a floating joint has no actuator (its torque is 0)
@@ -148,7 +154,7 @@ class PD(Controller):
             error[..., plain_v] = q[..., plain_q] - target[plain_v]
         else:
             error = q - target
-        tau = -kp * error - kd * qd
+        tau = ff - kp * error - kd * qd
         if self.gravity_compensation:
             tau += self._require_dynamics().gravity(q, self._p)
         if floating:
@@ -159,12 +165,15 @@ class PD(Controller):
         return {"kind": KIND_PD, "kp": self._sized(self.kp, n, "kp"),
                 "kd": self._sized(self.kd, n, "kd"),
                 "target": self._sized(self.target, n, "target"),
-                "gravity_compensation": self.gravity_compensation}
+                "gravity_compensation": self.gravity_compensation,
+                "feedforward": self._sized(self.feedforward, n, "feedforward")}
 
     def __repr__(self) -> str:
+        extra = "" if not np.any(self.feedforward) else \
+            f", feedforward={self.feedforward.tolist()}"
         return (f"PD(kp={self.kp.tolist()}, kd={self.kd.tolist()}, "
                 f"target={self.target.tolist()}, "
-                f"gravity_compensation={self.gravity_compensation})")
+                f"gravity_compensation={self.gravity_compensation}{extra})")
 
 
 class ComputedTorque(Controller):

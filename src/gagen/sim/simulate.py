@@ -167,7 +167,8 @@ def _python_controller(controller, n: int):
 
 
 def simulate(dyn, t_span, q0, qd0=None, controller=None, method: str = "RK45",
-             rtol: float = 1e-6, atol=1e-8, t_eval=None, p=None, **options) -> SimulationResult:
+             rtol: float = 1e-6, atol=1e-8, t_eval=None, p=None, fext=None,
+             **options) -> SimulationResult:
     """Integrate the equations of motion of `dyn` over `t_span` from (q0, qd0).
 
     dyn         a dynamics object from `gagen.load` (any backend for scipy methods).
@@ -189,6 +190,10 @@ def simulate(dyn, t_span, q0, qd0=None, controller=None, method: str = "RK45",
                 solver's own steps instead. Samples between steps come from the
                 method's dense output (rk4: cubic Hermite), accurate to the tolerances.
     p           None (defaults), a dict of parameter overrides, or a full array.
+    fext        constant wrenches on frames, {frame: (fx, fy, fz, tx, ty, tz)} in world
+                axes at the frames' origins (a support, a payload's weight): their
+                generalised force J(q)^T w acts with the controller's torques (tau reports
+                the controller's torques alone).
     options     scipy methods: passed on to solve_ivp (first_step, max_step, ...);
                 dopri5: first_step, max_step, max_steps; rk4: h.
 
@@ -208,11 +213,23 @@ def simulate(dyn, t_span, q0, qd0=None, controller=None, method: str = "RK45",
     if controller is not None and not callable(controller):
         raise TypeError("controller must be None, a gagen controller or a callable "
                         "(t, q, qd) -> tau")
+    wrenches = constant_wrenches(dyn, fext)
     if isinstance(method, str) and method in COMPILED_METHODS:
         return _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol_arr,
-                                  t_eval, pvec, options)
+                                  t_eval, pvec, options, wrenches)
     return _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol_arr, t_eval,
-                           pvec, options)
+                           pvec, options, wrenches)
+
+
+def constant_wrenches(dyn, fext) -> tuple[np.ndarray, np.ndarray] | None:
+    """fext = {frame: wrench} as (frame numbers (k,), wrenches (k, 6)), checked; or None."""
+    if not fext:
+        return None
+    from ..runtime.frames import external_wrenches
+
+    pairs = external_wrenches(dyn.info, fext, None)
+    return (np.array([k for k, _ in pairs], dtype=np.int32),
+            np.array([w for _, w in pairs], dtype=float))
 
 
 def initial_configuration(dyn, q0: np.ndarray) -> np.ndarray:
@@ -266,7 +283,7 @@ def _pair(t_span):
 
 
 def _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval, pvec,
-                    options) -> SimulationResult:
+                    options, wrenches=None) -> SimulationResult:
     from scipy.integrate import OdeSolver, solve_ivp
 
     if isinstance(method, type) and issubclass(method, OdeSolver):
@@ -294,12 +311,13 @@ def _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval
     zero = np.zeros(n)
     fd = dyn.forward_dynamics
     rate = _configuration_rate(dyn)
+    fext = None if wrenches is None else dict(zip(wrenches[0].tolist(), wrenches[1]))
 
     def rhs(t, y):
         q = y[:nq]
         qd = y[nq:]
         tau = zero if law is None else law(t, q, qd)
-        return np.concatenate((rate(q, qd), fd(q, qd, tau, pvec)))
+        return np.concatenate((rate(q, qd), fd(q, qd, tau, pvec, fext=fext)))
 
     start = time.perf_counter()
     name = method if isinstance(method, str) else method.__name__
@@ -460,9 +478,11 @@ SUCCESS_MESSAGE = "The solver successfully reached the end of the integration in
 
 
 def _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval, pvec,
-                       options) -> SimulationResult:
+                       options, wrenches=None) -> SimulationResult:
     settings = compiled_settings(dyn, method, t0, t1, rtol, atol, t_eval, options)
     spec = controller_spec(controller, method, dyn.n, dyn=dyn)
+    if wrenches is not None:
+        spec = {**spec, "frames": wrenches[0], "wrenches": wrenches[1]}
     start = time.perf_counter()
     sim = dyn.module.CompiledSimulation(dyn.kernels, pvec, **spec)
     q, qd, tau, status, info = settings.run(sim, q0, qd0)

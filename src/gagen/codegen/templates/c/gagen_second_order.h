@@ -24,6 +24,9 @@
  *                      a PD law's error per velocity coordinate (0 for floating joints)
  *   static void gagen_so_unactuated(double *u);
  *                      zeroes the torques no actuator gives: a floating joint's wrench
+ *   static void gagen_so_wrenches(const double *q, const double *p, int count,
+ *                                 const int *frames, const double *wrenches, double *u);
+ *                      adds J^T w of wrenches on frames (gagen_control's nframes ...)
  *
  * and gets gagen_so_dopri5, gagen_so_rk4 and gagen_so_torques.
  *
@@ -57,8 +60,11 @@
 /* A gagen_control read once: its arrays copied, NULL ones as zeros. */
 typedef struct {
     int kind, gravity_compensation;
-    double kp[GAGEN_SO_NV], kd[GAGEN_SO_NV], target[GAGEN_SO_NV];
+    double kp[GAGEN_SO_NV], kd[GAGEN_SO_NV], target[GAGEN_SO_NV], ff[GAGEN_SO_NV];
     double q0[GAGEN_SO_NQ], qf[GAGEN_SO_NQ], Tp;
+    int nframes;
+    const int *frames;
+    const double *wrenches;
     gagen_poll_fn poll;
     void *poll_ctx;
 } gagen_so_law;
@@ -88,6 +94,13 @@ static int gagen_so_law_init(gagen_so_law *law, const gagen_control *c)
     gagen_so_copy_or_zero(c->target, law->target, GAGEN_SO_NV);
     gagen_so_copy_or_zero(c->traj_q0, law->q0, GAGEN_SO_NQ);
     gagen_so_copy_or_zero(c->traj_qf, law->qf, GAGEN_SO_NQ);
+    gagen_so_copy_or_zero(c->kind == GAGEN_CTRL_PD ? c->feedforward : NULL, law->ff,
+                          GAGEN_SO_NV);
+    if (c->nframes < 0 || (c->nframes > 0 && (c->frames == NULL || c->wrenches == NULL)))
+        return GAGEN_ERR_BAD_ARG;
+    law->nframes = c->nframes;
+    law->frames = c->frames;
+    law->wrenches = c->wrenches;
     law->Tp = c->traj_Tp;
     law->poll = c->poll;
     law->poll_ctx = c->poll_ctx;
@@ -149,7 +162,7 @@ GAGEN_SO_INLINE void gagen_so_control(const gagen_so_law *law, const double *p, 
         double e[GAGEN_SO_NV];
         gagen_so_error(q, law->target, e);
         for (i = 0; i < GAGEN_SO_NV; ++i)
-            u[i] = -law->kp[i] * e[i] - law->kd[i] * qd[i];
+            u[i] = law->ff[i] - law->kp[i] * e[i] - law->kd[i] * qd[i];
         if (law->gravity_compensation)
             for (i = 0; i < GAGEN_SO_NV; ++i) u[i] += G[i];
         gagen_so_unactuated(u);
@@ -171,6 +184,7 @@ GAGEN_SO_INLINE void gagen_so_derivative(const gagen_so_law *law, const double *
 {
     double u[GAGEN_SO_NV];
     gagen_so_control(law, p, t, y, y + GAGEN_SO_NQ, S + GAGEN_SO_GRAVITY, u);
+    if (law->nframes > 0) gagen_so_wrenches(y, p, law->nframes, law->frames, law->wrenches, u);
     gagen_so_qdot(y, y + GAGEN_SO_NQ, k);
     gagen_so_velocity(S, y, y + GAGEN_SO_NQ, u, p, k + GAGEN_SO_NQ);
 }
