@@ -26,14 +26,15 @@ class NumericBody:
 
     name: str
     parent: int  # index into NumericModel.bodies, -1 for the world
-    joint_type: str  # "revolute", "continuous", "prismatic" or "fixed"
+    joint_type: str  # "revolute", "continuous", "prismatic", "fixed" or "floating"
     origin_R: np.ndarray  # 3x3, joint frame orientation in the parent frame
     origin_xyz: np.ndarray  # (3,), joint frame origin in the parent frame
     axis: np.ndarray  # (3,), unit axis in the joint (= body) frame
     mass: float
     com: np.ndarray  # (3,), mass centre in the body frame
     inertia: np.ndarray  # 3x3 central inertia in the body frame
-    coordinate: int | None  # index into q, None for a fixed joint
+    coordinate: int | None  # first velocity coordinate, None for a fixed joint
+    configuration: int | None = None  # first entry of q (a floating joint has 7)
 
     @property
     def rotates(self) -> bool:
@@ -47,6 +48,7 @@ class NumericModel:
     bodies: tuple[NumericBody, ...]
     gravity: np.ndarray  # (3,), world frame
     coordinates: tuple[str, ...]
+    nq: int = 0  # the size of q (the number of coordinates unless a joint floats)
 
     @property
     def dof(self) -> int:
@@ -95,12 +97,12 @@ def numeric_model(model: Model, p=None) -> NumericModel:
     """Evaluate every SymPy entry of `model` at its parameter defaults, overridden by `p`."""
     subs = {sp.Symbol(k): sp.Float(v, 30) for k, v in parameter_values(model, p).items()}
     index = {b.name: i for i, b in enumerate(model.bodies)}
-    coord_index = {name: k for k, name in enumerate(model.coordinates)}
+    starts = model.indices()
     bodies = []
     for b in model.bodies:
         j = b.joint
         axis = _floats(j.axis, subs).reshape(3)
-        if j.moves:
+        if j.moves and not j.floating:
             axis = axis / np.linalg.norm(axis)  # only the direction matters
         bodies.append(NumericBody(
             name=b.name, parent=index.get(b.parent, -1), joint_type=j.type,
@@ -108,9 +110,10 @@ def numeric_model(model: Model, p=None) -> NumericModel:
             origin_xyz=_floats(j.origin_xyz, subs).reshape(3), axis=axis,
             mass=float(sp.sympify(b.mass).xreplace(subs).evalf(30)),
             com=_floats(b.com, subs).reshape(3), inertia=_floats(b.inertia, subs).reshape(3, 3),
-            coordinate=coord_index[j.name] if j.moves else None))
+            coordinate=starts[b.name][1] if j.moves else None,
+            configuration=starts[b.name][0] if j.moves else None))
     return NumericModel(tuple(bodies), _floats(model.gravity, subs).reshape(3),
-                        tuple(model.coordinates))
+                        tuple(model.coordinates), model.nq)
 
 
 def _floats(matrix, subs) -> np.ndarray:

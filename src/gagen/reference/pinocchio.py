@@ -4,7 +4,8 @@
 Pinocchio needs its joints in depth-first order, which gagen's parents-first body order
 need not be, so joints are added depth-first and `pm.gagen_order[k]` is gagen's
 coordinate index of Pinocchio's k-th velocity; `to_pinocchio` / `from_pinocchio` convert
-vectors (every joint has nq = nv = 1, so one permutation serves q, qd, qdd and tau).
+vectors (one permutation serves qd, qdd and tau, and q when no joint floats;
+`configuration_to_pinocchio` converts q).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ def pinocchio_model(model, p=None, aligned: bool = False) -> Any:
     joint_of: dict[int, int] = {}  # per body: the Pinocchio joint carrying it
     placement: dict[int, Any] = {}  # and its frame's placement in that joint
     order: list[int] = []
+    config_order: list[int] = []
     for i in nm.depth_first():
         b = nm.bodies[i]
         parent_joint = 0 if b.parent < 0 else joint_of[b.parent]
@@ -38,16 +40,21 @@ def pinocchio_model(model, p=None, aligned: bool = False) -> Any:
         if b.coordinate is None:
             joint_id, body_place = parent_joint, origin
         else:
-            joint = _joint_model(pin, b.axis, b.rotates, aligned)
+            joint = pin.JointModelFreeFlyer() if b.joint_type == "floating" \
+                else _joint_model(pin, b.axis, b.rotates, aligned)
             joint_id = pm.addJoint(parent_joint, joint, origin, nm.coordinates[b.coordinate])
             body_place = pin.SE3.Identity()
-            order.append(b.coordinate)
+            size = 6 if b.joint_type == "floating" else 1
+            order.extend(range(b.coordinate, b.coordinate + size))
+            config_order.extend(range(b.configuration, b.configuration + size + (size == 6)))
         pm.appendBodyToJoint(joint_id, pin.Inertia(b.mass, b.com, b.inertia), body_place)
         joint_of[i], placement[i] = joint_id, body_place
     pm.gravity = pin.Motion(np.asarray(nm.gravity, dtype=float), np.zeros(3))
-    if not (pm.nq == pm.nv == nm.dof):
-        raise RuntimeError(f"the Pinocchio model has nq={pm.nq}, nv={pm.nv}; expected {nm.dof}")
+    if pm.nv != nm.dof or pm.nq != (nm.nq or nm.dof):
+        raise RuntimeError(f"the Pinocchio model has nq={pm.nq}, nv={pm.nv}; expected "
+                           f"{nm.nq or nm.dof}, {nm.dof}")
     pm.gagen_order = np.array(order, dtype=int)
+    pm.gagen_configuration_order = np.array(config_order, dtype=int)
     return pm
 
 
@@ -65,6 +72,12 @@ def to_pinocchio(pm, *vectors) -> list[np.ndarray]:
     """Vectors in gagen's coordinate order -> Pinocchio's (contiguous float64)."""
     return [np.ascontiguousarray(np.asarray(v, dtype=np.float64)[pm.gagen_order])
             for v in vectors]
+
+
+def configuration_to_pinocchio(pm, q) -> np.ndarray:
+    """A configuration in gagen's order -> Pinocchio's (a floating joint's 7 entries are in
+    the same order in both: position, then quaternion x, y, z, w)."""
+    return np.ascontiguousarray(np.asarray(q, dtype=np.float64)[pm.gagen_configuration_order])
 
 
 def from_pinocchio(pm, vector) -> np.ndarray:

@@ -1,0 +1,402 @@
+"""Floating bases, frames and external wrenches, against Pinocchio's own algorithms.
+
+References: `pinocchio.buildModelFromUrdf(path, JointModelFreeFlyer())` (Pinocchio's URDF
+parse, nothing of gagen's shared) for the shared robots, and gagen's Pinocchio builder
+(`gagen.reference.pinocchio`) for random floating trees. Checked at random states to
+1e-9 relative: M, forward and inverse dynamics, gravity, energy, integrate, difference,
+every frame's placement, velocity and Jacobian (LOCAL_WORLD_ALIGNED), and aba / rnea with
+external forces. Then the simulations: a torque-free tumbling body keeps its energy and a
+unit quaternion, gagen's dopri5 takes SciPy RK45's steps, and a quadruped standing on four
+feet (contact forces by least squares on the feet's Jacobians) stays still.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from random_trees import random_model
+
+import gagen
+from gagen.model import Body, Joint, Model
+from gagen.model.numeric import numeric_model
+from gagen.reference.pinocchio import pinocchio_model
+
+pin = pytest.importorskip("pinocchio")
+
+URDF = Path(__file__).resolve().parent / "data" / "urdf"
+RTOL = 1e-9
+FEET = ("LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT")
+
+
+def close(actual, expected, what: str, rtol: float = RTOL) -> None:
+    actual, expected = np.asarray(actual, dtype=float), np.asarray(expected, dtype=float)
+    scale = max(float(np.abs(expected).max()), 1e-300)
+    np.testing.assert_allclose(actual, expected, rtol=rtol, atol=rtol * scale, err_msg=what)
+
+
+class Reference:
+    """Pinocchio's model of the same robot, taking and giving gagen's vectors."""
+
+    def __init__(self, dyn, model):
+        self.model, self.data = model, model.createData()
+        if hasattr(model, "gagen_order"):  # gagen's builder: permutations given
+            self.v_order, self.q_order = model.gagen_order, model.gagen_configuration_order
+        else:  # Pinocchio's URDF parse: match the joints by name, the base first
+            names = dyn.coordinates[6:]
+            ids = [model.getJointId(n) for n in names]
+            assert all(model.nqs[j] == 1 for j in ids), "no continuous joints in these robots"
+            self.v_order = np.array([*range(6), *(model.idx_vs[j] for j in ids)])
+            self.q_order = np.array([*range(7), *(model.idx_qs[j] for j in ids)])
+
+    def q(self, q):
+        out = np.empty(self.model.nq)
+        out[self.q_order] = q
+        return out
+
+    def v(self, v):
+        out = np.empty(self.model.nv)
+        out[self.v_order] = v
+        return out
+
+    def ours(self, v):
+        return np.asarray(v)[..., self.v_order]
+
+    def mass_matrix(self, q):
+        M = np.array(pin.crba(self.model, self.data, self.q(q)))
+        M = np.triu(M) + np.triu(M, 1).T
+        return M[np.ix_(self.v_order, self.v_order)]
+
+    def fext(self, q, frame: str, wrench):
+        """Pinocchio's external forces (per joint, in the joint's frame) of a wrench in
+        world axes at a frame's origin."""
+        m, d = self.model, self.data
+        pin.framesForwardKinematics(m, d, self.q(q))
+        fid = m.getFrameId(frame)
+        joint = m.frames[fid].parentJoint
+        at_origin = pin.SE3(np.eye(3), d.oMf[fid].translation)
+        force = at_origin.act(pin.Force(np.asarray(wrench[:3]), np.asarray(wrench[3:])))
+        forces = [pin.Force.Zero() for _ in range(m.njoints)]
+        forces[joint] = d.oMi[joint].actInv(force)
+        return forces
+
+
+def random_state(dyn, rng):
+    q = dyn.neutral()
+    for iq, _ in dyn.info.floating_joints():
+        quaternion = rng.normal(size=4)
+        q[iq: iq + 3] = rng.normal(size=3)
+        q[iq + 3: iq + 7] = quaternion / np.linalg.norm(quaternion)
+    plain = [k for k, name in enumerate(dyn.configuration) if name in dyn.coordinates]
+    q[plain] = rng.uniform(-1.2, 1.2, len(plain))
+    return q, rng.normal(size=dyn.nv), rng.normal(size=dyn.nv)
+
+
+def check_against_pinocchio(dyn, ref: Reference, seed: int = 0, states: int = 3) -> None:
+    rng = np.random.default_rng(seed)
+    m, d = ref.model, ref.data
+    for _ in range(states):
+        q, v, a = random_state(dyn, rng)
+        qp, vp, ap = ref.q(q), ref.v(v), ref.v(a)
+        close(dyn.mass_matrix(q), ref.mass_matrix(q), "M")
+        close(dyn.inverse_dynamics(q, v, a), ref.ours(pin.rnea(m, d, qp, vp, ap)), "rnea")
+        close(dyn.forward_dynamics(q, v, a), ref.ours(pin.aba(m, d, qp, vp, ap)), "aba")
+        close(dyn.gravity(q), ref.ours(pin.computeGeneralizedGravity(m, d, qp)), "gravity")
+        close(dyn.energy(q, v)[0], pin.computeKineticEnergy(m, d, qp, vp), "kinetic energy")
+        q2, _, _ = random_state(dyn, rng)
+        close(dyn.energy(q2, v)[1] - dyn.energy(q, v)[1],
+              pin.computePotentialEnergy(m, d, ref.q(q2)) - pin.computePotentialEnergy(m, d, qp),
+              "potential energy")
+        moved = dyn.integrate(q, v, 0.3)
+        expected = pin.integrate(m, qp, vp * 0.3)
+        # the same configuration (a quaternion and its negative are one orientation)
+        assert np.abs(dyn.difference(moved, _ours_q(ref, expected))).max() < 1e-12
+        close(dyn.difference(q, q2), ref.ours(pin.difference(m, qp, ref.q(q2))), "difference")
+        pin.forwardKinematics(m, d, qp, vp)
+        pin.updateFramePlacements(m, d)
+        pin.computeJointJacobians(m, d, qp)
+        for frame in dyn.frames:
+            fid = m.getFrameId(frame)
+            R, p = dyn.frame_placement(q, frame)
+            close(R, d.oMf[fid].rotation, f"{frame} rotation")
+            close(p, d.oMf[fid].translation, f"{frame} position")
+            J = pin.getFrameJacobian(m, d, fid, pin.LOCAL_WORLD_ALIGNED)
+            close(dyn.frame_jacobian(q, frame), ref.ours(J), f"{frame} Jacobian")
+            velocity = pin.getFrameVelocity(m, d, fid, pin.LOCAL_WORLD_ALIGNED).vector
+            close(dyn.frame_velocity(q, v, frame), velocity, f"{frame} velocity")
+        frame = dyn.frames[-1]
+        wrench = rng.normal(size=6)
+        forces = ref.fext(q, frame, wrench)
+        close(dyn.forward_dynamics(q, v, a, fext={frame: wrench}),
+              ref.ours(pin.aba(m, d, qp, vp, ap, forces)), "aba with fext")
+        close(dyn.inverse_dynamics(q, v, a, fext={frame: wrench}),
+              ref.ours(pin.rnea(m, d, qp, vp, ap, forces)), "rnea with fext")
+
+
+def _ours_q(ref: Reference, q_pin) -> np.ndarray:
+    return np.asarray(q_pin)[ref.q_order]
+
+
+# --------------------------------------------------------------------- the real robots
+
+@pytest.fixture(scope="module")
+def anymal(tmp_path_factory):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gagen.InertiaWarning)
+        return gagen.load(URDF / "anymal_c.urdf", floating_base=True,
+                          cache_dir=tmp_path_factory.mktemp("cache"))
+
+
+def test_anymal_floating_matches_pinocchio(anymal):
+    assert (anymal.nq, anymal.nv) == (19, 18)
+    assert anymal.configuration[:7] == [f"root_joint_{s}" for s in
+                                        ("x", "y", "z", "qx", "qy", "qz", "qw")]
+    assert anymal.coordinates[:6] == [f"root_joint_{s}" for s in
+                                      ("vx", "vy", "vz", "wx", "wy", "wz")]
+    model = pin.buildModelFromUrdf(str(URDF / "anymal_c.urdf"), pin.JointModelFreeFlyer())
+    check_against_pinocchio(anymal, Reference(anymal, model))
+
+
+@pytest.mark.slow
+def test_talos_floating_matches_pinocchio(tmp_path):
+    path = URDF / "talos_full_v2.urdf"
+    dyn = gagen.load(path, floating_base=True, cache_dir=tmp_path)
+    model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+    check_against_pinocchio(dyn, Reference(dyn, model), states=2)
+
+
+@pytest.mark.parametrize("backend", ["lambdify", "compiled"])
+def test_panda_tool_frame_matches_pinocchio(backend, cache_dir):
+    """A fixed base: the frames of links merged by fixed joints (the hand's tool centre)."""
+    path = URDF / "panda.urdf"
+    options = {"cache_dir": cache_dir} if backend == "compiled" else {}
+    dyn = gagen.load(path, backend=backend, **options)
+    assert "panda_hand_tcp" in dyn.frames and "panda_hand_tcp_joint" in dyn.frames
+    model = pin.buildModelFromUrdf(str(path))
+    data = model.createData()
+    ids = [model.getJointId(n) for n in dyn.coordinates]
+    order = np.array([model.idx_vs[j] for j in ids])
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        q = rng.uniform(-1, 1, dyn.n)
+        qp = np.empty(model.nq)
+        qp[order] = q
+        pin.computeJointJacobians(model, data, qp)
+        pin.updateFramePlacements(model, data)
+        fid = model.getFrameId("panda_hand_tcp")
+        R, p = dyn.frame_placement(q, "panda_hand_tcp")
+        close(R, data.oMf[fid].rotation, "tcp rotation")
+        close(p, data.oMf[fid].translation, "tcp position")
+        J = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+        close(dyn.frame_jacobian(q, "panda_hand_tcp"), J[:, order], "tcp Jacobian")
+
+
+# ----------------------------------------------------------------- random floating trees
+
+def floating_tree(seed: int, bodies: int = 5) -> Model:
+    """A random tree whose first body floats, every other root re-attached to it."""
+    tree = random_model(np.random.default_rng(seed), bodies)
+    first = tree.bodies[0]
+    root = Body(name=first.name, parent="world", joint=Joint(name="base", type="floating"),
+                mass=first.mass if float(first.mass) > 0 else 1.0, com=first.com,
+                inertia=first.inertia)
+    rest = [b if b.parent != "world" else Body(b.name, first.name, b.joint, b.mass, b.com,
+                                                 b.inertia) for b in tree.bodies[1:]]
+    return Model(name=f"floating{seed}", bodies=(root, *rest), parameters=tree.parameters,
+                 gravity=tree.gravity, source="<floating tree>")
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.parametrize("backend", ["lambdify", "compiled"])
+def test_random_floating_trees_match_pinocchio(seed, backend, cache_dir):
+    model = floating_tree(seed)
+    options = {"cache_dir": cache_dir} if backend == "compiled" else {}
+    dyn = gagen.load(model, backend=backend, **options)
+    check_against_pinocchio(dyn, Reference(dyn, pinocchio_model(numeric_model(model))), seed)
+
+
+def test_recursive_and_gibbs_appell_agree_on_a_floating_tree():
+    """The quasi-velocities through both derivations (GA: the paper's route)."""
+    model = floating_tree(3, bodies=4)
+    ga = gagen.load(model, backend="lambdify", derivation="gibbs-appell")
+    rec = gagen.load(model, backend="lambdify", derivation="recursive")
+    rng = np.random.default_rng(0)
+    q, v, a = random_state(ga, rng)
+    for name in ("mass_matrix", "inverse_dynamics", "forward_dynamics"):
+        args = (q,) if name == "mass_matrix" else (q, v, a)
+        close(getattr(ga, name)(*args), getattr(rec, name)(*args), name, rtol=1e-12)
+
+
+# ------------------------------------------------------------------------- simulations
+
+@pytest.fixture(scope="module")
+def tumbler(tmp_path_factory):
+    path = tmp_path_factory.mktemp("model") / "tumbler.yaml"
+    path.write_text(TUMBLER)
+    return gagen.load(path, cache_dir=tmp_path_factory.mktemp("cache"))
+
+
+TUMBLER = """
+name: tumbler
+gravity: [0, 0, -g]
+parameters: {g: 9.81, m: 2.0}
+bodies:
+  - name: box
+    joint: {name: base, type: floating}
+    mass: m
+    com: [0.1, 0, 0]
+    inertia: [0.1, 0.2, 0.3, 0.01, 0, 0]
+  - name: arm
+    parent: box
+    joint: {name: hinge, type: revolute, axis: [0, 1, 0], origin: {xyz: [0.2, 0, 0]}}
+    mass: 1.0
+    com: [0, 0, -0.2]
+    inertia: [0.02, 0.02, 0.001, 0, 0, 0]
+"""
+
+
+@pytest.mark.parametrize("method", ["dopri5", "RK45", "rk4"])
+def test_torque_free_tumbling_keeps_energy_and_a_unit_quaternion(tumbler, method):
+    q0 = tumbler.neutral()
+    v0 = np.array([0.3, 0.0, 0.1, 1.0, 2.0, 0.5, 3.0])
+    options = {"h": 1e-3} if method == "rk4" else {"rtol": 1e-10, "atol": 1e-12}
+    result = gagen.simulate(tumbler, (0.0, 5.0), q0, v0, method=method, p={"g": 0.0},
+                            **options)
+    kinetic = tumbler.energy(result.q, result.qd, p={"g": 0.0})[0]
+    assert np.abs(kinetic - kinetic[0]).max() < 1e-8 * kinetic[0]
+    assert np.abs(np.linalg.norm(result.q[:, 3:7], axis=1) - 1).max() < 1e-14
+    assert result.q.shape == (501, 8) and result.qd.shape == (501, 7)
+    assert result.columns()[:3] == ["t", "base_x", "base_y"]
+    # the body really tumbled: its orientation changed by much more than the tolerance
+    assert np.abs(result.q[-1, 3:7] - result.q[0, 3:7]).max() > 0.1
+
+
+def test_dopri5_takes_scipy_rk45_steps_with_a_floating_base(tumbler):
+    q0 = tumbler.neutral()
+    v0 = np.array([0.3, 0.0, 0.1, 1.0, 2.0, 0.5, 3.0])
+    c = gagen.simulate(tumbler, (0.0, 2.0), q0, v0, method="dopri5")
+    s = gagen.simulate(tumbler, (0.0, 2.0), q0, v0, method="RK45")
+    assert c.stats["nfev"] == s.stats["nfev"]
+    np.testing.assert_allclose(c.q, s.q, rtol=1e-10, atol=1e-10)
+    total = sum(tumbler.energy(c.q, c.qd))  # gravity on: kinetic + potential is conserved
+    assert np.abs(total - total[0]).max() < 1e-5 * np.abs(total).max()
+
+
+def test_a_quadruped_stands_still_on_four_feet(anymal):
+    """Contact forces from a least-squares solve on the feet's Jacobians (the base's six
+    equations), joint torques for the rest: qdd = 0, and 2 s of simulation keep it still."""
+    dyn = anymal
+    q0 = dyn.neutral()
+    q0[2] = 0.6
+    posture = {"HAA": 0.0, "HFE": 0.5, "KFE": -1.0}
+    for k, name in enumerate(dyn.coordinates[6:]):
+        sign = -1 if name.startswith(("LH", "RH")) else 1
+        q0[7 + k] = sign * posture[name.split("_")[1]]
+    gravity = dyn.gravity(q0)
+    JT = np.concatenate([dyn.frame_jacobian(q0, foot)[:3] for foot in FEET]).T  # nv x 12
+    forces, *_ = np.linalg.lstsq(JT[:6], gravity[:6], rcond=None)
+    torques = gravity - JT @ forces
+    assert np.abs(torques[:6]).max() < 1e-9 * np.abs(gravity).max()
+    assert forces[2::3].min() > 100  # each foot carries its share of about 51 kg
+    fext = {foot: np.concatenate([forces[3 * k: 3 * k + 3], np.zeros(3)])
+            for k, foot in enumerate(FEET)}
+    assert np.abs(dyn.forward_dynamics(q0, np.zeros(dyn.nv), torques, fext=fext)).max() < 1e-10
+    target = np.zeros(dyn.nv)
+    target[6:] = q0[7:]
+    hold = gagen.PD(kp=100.0, kd=5.0, target=target, feedforward=torques)
+    for method in ("dopri5", "RK45"):
+        run = gagen.simulate(dyn, (0.0, 2.0), q0, None, controller=hold, method=method,
+                             fext=fext)
+        drift = dyn.difference(np.tile(q0, (len(run.t), 1)), run.q)
+        assert np.abs(drift).max() < 1e-5, method
+        assert np.abs(run.qd).max() < 1e-4, method
+
+
+def test_a_floating_batch_gives_simulate_s_numbers(tumbler):
+    rng = np.random.default_rng(2)
+    velocities = rng.normal(size=(3, tumbler.nv))
+    batch = gagen.simulate_batch(tumbler, (0.0, 1.0), tumbler.neutral(), velocities)
+    for k in range(3):
+        single = gagen.simulate(tumbler, (0.0, 1.0), tumbler.neutral(), velocities[k],
+                                method="dopri5")
+        assert np.array_equal(batch.q[k], single.q) and np.array_equal(batch.qd[k], single.qd)
+
+
+# --------------------------------------------------------------------- inputs and the C API
+
+def test_inputs_are_checked_against_nq_and_nv(tumbler):
+    with pytest.raises(ValueError, match=r"q must have shape \(8,\)"):
+        tumbler.mass_matrix(np.zeros(7))
+    with pytest.raises(ValueError, match=r"qd must have shape \(7,\)"):
+        tumbler.forward_dynamics(tumbler.neutral(), np.zeros(8), np.zeros(7))
+    with pytest.raises(ValueError, match="quaternion .* is zero"):
+        gagen.simulate(tumbler, (0, 1), np.zeros(8), None)
+    with pytest.raises(KeyError, match="unknown frame 'hand'"):
+        tumbler.frame_jacobian(tumbler.neutral(), "hand")
+    with pytest.raises(ValueError, match="ComputedTorque .* floating"):
+        gagen.simulate(tumbler, (0, 1), tumbler.neutral(), None, method="RK45",
+                       controller=gagen.ComputedTorque(gagen.Eq11Trajectory(
+                           np.zeros(7), np.zeros(7), 1.0)))
+    with pytest.raises(gagen.ModelError, match="floating_base=True applies to a URDF"):
+        gagen.load("rrr", floating_base=True)
+
+
+def test_an_urdf_floating_joint_is_honoured(tmp_path):
+    text = (URDF / "double_pendulum.urdf").read_text()
+    root = "base_link"
+    assert f'link name="{root}"' in text
+    text = text.replace("<robot", '<robot', 1).replace(
+        f'<link name="{root}"', f'<link name="world"/>\n  <joint name="free" type="floating">'
+        f'<parent link="world"/><child link="{root}"/></joint>\n  <link name="{root}"', 1)
+    path = tmp_path / "floating.urdf"
+    path.write_text(text)
+    dyn = gagen.load(path, backend="lambdify")
+    via_option = gagen.load(URDF / "double_pendulum.urdf", backend="lambdify",
+                            floating_base=True)
+    assert dyn.coordinates[:6] == [f"free_{s}" for s in ("vx", "vy", "vz", "wx", "wy", "wz")]
+    rng = np.random.default_rng(1)
+    q, v, a = random_state(dyn, rng)
+    close(dyn.inverse_dynamics(q, v, a), via_option.inverse_dynamics(q, v, a), "rnea")
+
+
+def test_the_c_api_applies_wrenches_on_frames(anymal):
+    """<model>_forward_dynamics_ext and _frame_jacobian, called as C functions."""
+    lib = ctypes.CDLL(anymal.module.__file__)
+    ident = anymal.info.name
+    double_p = np.ctypeslib.ndpointer(np.float64, flags="C")
+    fd = getattr(lib, f"{ident}_forward_dynamics_ext")
+    fd.argtypes = [double_p, double_p, double_p, double_p, ctypes.c_int,
+                   np.ctypeslib.ndpointer(np.int32, flags="C"), double_p, double_p]
+    fd.restype = ctypes.c_int
+    rng = np.random.default_rng(9)
+    q, v, tau = random_state(anymal, rng)
+    frames = np.array([anymal.frames.index(f) for f in FEET[:2]], dtype=np.int32)
+    wrenches = rng.normal(size=(2, 6))
+    out = np.empty(anymal.nv)
+    assert fd(q, v, tau, anymal.parameter_vector(), 2, frames, wrenches.ravel(), out) == 0
+    expected = anymal.forward_dynamics(q, v, tau, fext=dict(zip(FEET[:2], wrenches)))
+    close(out, expected, "C forward dynamics with wrenches", rtol=1e-12)
+    assert fd(q, v, tau, anymal.parameter_vector(), 1, np.array([10**6], np.int32),
+              wrenches.ravel(), out) != 0  # a bad frame number is refused
+
+
+def test_frames_accept_stacked_states_and_return_fresh_arrays(anymal):
+    rng = np.random.default_rng(5)
+    states = [random_state(anymal, rng) for _ in range(4)]
+    Q = np.stack([s[0] for s in states])
+    V = np.stack([s[1] for s in states])
+    J = anymal.frame_jacobian(Q, "LF_FOOT")
+    R, p = anymal.frame_placement(Q, "LF_FOOT")
+    vel = anymal.frame_velocity(Q, V, "LF_FOOT")
+    assert J.shape == (4, 6, anymal.nv) and R.shape == (4, 3, 3) and p.shape == (4, 3)
+    for k in range(4):
+        close(J[k], anymal.frame_jacobian(Q[k], "LF_FOOT"), "stacked Jacobian", 1e-15)
+        close(vel[k], J[k] @ V[k], "velocity = J qd", 1e-12)
+    first = anymal.frame_jacobian(Q[0], "LF_FOOT")
+    again = anymal.frame_jacobian(Q[1], "LF_FOOT")
+    assert not np.shares_memory(first, again)
+    assert math.isclose(np.linalg.det(R[0]), 1.0, rel_tol=1e-12)
