@@ -136,9 +136,12 @@ def synthetic_results() -> dict:
                   for c, label, m, s in [("a", "scipy RK45, lambdify backend", "RK45", 0.15),
                                          ("c", "compiled dopri5", "dopri5", 3e-4)]]
     scaling = [{"model": name, "dof": n, "derive_s": 0.1 * n, "generate_s": 0.1 * n,
-                "compile_s": 5.0, "build_s": 5.5, "ops_before_cse": 100 * n,
-                "ops_after_cse": 80 * n, "cse_ratio": 1.25, "load_s": 0.01,
-                "fd_us": 0.1 * n, "fd_iqr_us": 0.01, "cached": False}
+                "compile_s": 5.0, "build_s": 5.5, "peak_mb": 300.0, "ops_before_cse": 100 * n,
+                "ops_after_cse": 80 * n, "load_s": 0.01, "cached": False,
+                "fd_us": 0.1 * n, "id_us": 0.05 * n, "M_us": 0.08 * n,
+                "pin_fd_us": 0.5 * n, "pin_id_us": 0.2 * n, "pin_M_us": 0.2 * n,
+                "fd_state_us": 0.09 * n, "id_state_us": 0.04 * n, "M_state_us": 0.07 * n,
+                "cpp_fd_us": float("nan"), "cpp_id_us": float("nan"), "cpp_M_us": float("nan")}
                for name, n in (("chain:2", 2), ("chain:4", 4), ("ur5", 6))]
     return {"machine": machine,
             "settings": {"mode": "default", "command": "python -m gagen bench",
@@ -161,9 +164,10 @@ def test_report_has_the_tables_the_machine_and_the_plots(tmp_path):
                    ("| N | compiled ns/state (IQR) | lambdify ns/state (IQR) "
                    "| lambdify / compiled |"),
                    "| case | method | median | spread (quartiles) |",
-                   ("| model | dof | derive s | generate s (incl. CSE) | compile s "
-                   "| ops before CSE | ops after CSE |")):
+                   ("| model | dof | derive s | generate s | compile s | build s | peak MB "
+                   "| FD µs (Pinocchio ×) |")):
         assert header in text, header
+    assert "| chain:4 | 4 | 0.40 | 0.40 | 5.00 | 5.5 | 300 | 0.40 (5.0×) |" in text
     assert "| forward dynamics | Pinocchio | `f(x)` | 1.50 |" in text
     assert "| 10 | 60.0 (1.0) | 6,000 (1.0) | 100 |" in text
     assert "**Failed:** `RuntimeError: no panda`" in text
@@ -201,8 +205,8 @@ def test_urdf_dir_is_found_or_skipped_with_a_note(tmp_path):
     assert models == ["chain:2", "chain:4", "chain:6", str(tmp_path / "ur5_robot.urdf")]
     assert notes == []
     models, notes = scaling_models(full=True, urdf_dir=tmp_path)
-    assert models[:11] == [f"chain:{n}" for n in range(2, 13)]
-    assert len(notes) == 1 and "panda.urdf" in notes[0]
+    assert models[:8] == [f"chain:{n}" for n in (5, 10, 15, 20, 24, 30, 40, 50)]
+    assert len(notes) == 5 and "panda.urdf" in notes[0] and "tiago.urdf" in notes[-1]
     models, notes = scaling_models(full=False, urdf_dir=tmp_path / "nowhere")
     assert models == ["chain:2", "chain:4", "chain:6"] and "ur5_robot.urdf" in notes[0]
 
