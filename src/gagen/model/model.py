@@ -12,7 +12,7 @@ import contextvars
 import hashlib
 import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import sympy as sp
@@ -229,14 +229,18 @@ class Model:
     @property
     def frames(self) -> list[Frame]:
         """Every named frame: each body's own (its link, and its joint, whose frame is the
-        body's: gagen's body frames are joint frames), then `extra_frames`. A name is
-        listed once (the first frame with it)."""
+        body's: gagen's body frames are joint frames), then `extra_frames`. Names are
+        unique: a joint named like a link (ANYmal C's link and joint `LF_HAA`) is listed
+        as `joint:<name>`."""
         frames: dict[str, Frame] = {}
-        for b in self.bodies:
-            for name, kind in ((b.name, "link"), (b.joint.name, "joint")):
-                frames.setdefault(name, Frame(name, b.name, kind=kind))
-        for f in self.extra_frames:
-            frames.setdefault(f.name, f)
+        listed = [f for b in self.bodies
+                  for f in (Frame(b.name, b.name), Frame(b.joint.name, b.name, kind="joint"))]
+        for f in listed + list(self.extra_frames):
+            name = f.name
+            if name in frames and frames[name].kind != f.kind:
+                name = f"{f.kind}:{f.name}"
+            if name not in frames:
+                frames[name] = replace(f, name=name)
         return list(frames.values())
 
     def body(self, name: str) -> Body:

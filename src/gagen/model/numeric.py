@@ -35,6 +35,7 @@ class NumericBody:
     inertia: np.ndarray  # 3x3 central inertia in the body frame
     coordinate: int | None  # first velocity coordinate, None for a fixed joint
     configuration: int | None = None  # first entry of q (a floating joint has 7)
+    joint_name: str = ""
 
     @property
     def rotates(self) -> bool:
@@ -111,7 +112,7 @@ def numeric_model(model: Model, p=None) -> NumericModel:
             mass=float(sp.sympify(b.mass).xreplace(subs).evalf(30)),
             com=_floats(b.com, subs).reshape(3), inertia=_floats(b.inertia, subs).reshape(3, 3),
             coordinate=starts[b.name][1] if j.moves else None,
-            configuration=starts[b.name][0] if j.moves else None))
+            configuration=starts[b.name][0] if j.moves else None, joint_name=j.name))
     return NumericModel(tuple(bodies), _floats(model.gravity, subs).reshape(3),
                         tuple(model.coordinates), model.nq)
 

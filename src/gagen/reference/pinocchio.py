@@ -39,15 +39,18 @@ def pinocchio_model(model, p=None, aligned: bool = False) -> Any:
         origin = parent_place * pin.SE3(b.origin_R, b.origin_xyz)
         if b.coordinate is None:
             joint_id, body_place = parent_joint, origin
+            pm.addFrame(pin.Frame(b.joint_name, joint_id, origin, pin.FIXED_JOINT))
         else:
             joint = pin.JointModelFreeFlyer() if b.joint_type == "floating" \
                 else _joint_model(pin, b.axis, b.rotates, aligned)
-            joint_id = pm.addJoint(parent_joint, joint, origin, nm.coordinates[b.coordinate])
+            joint_id = pm.addJoint(parent_joint, joint, origin, b.joint_name)
+            pm.addJointFrame(joint_id)
             body_place = pin.SE3.Identity()
             size = 6 if b.joint_type == "floating" else 1
             order.extend(range(b.coordinate, b.coordinate + size))
             config_order.extend(range(b.configuration, b.configuration + size + (size == 6)))
         pm.appendBodyToJoint(joint_id, pin.Inertia(b.mass, b.com, b.inertia), body_place)
+        pm.addFrame(pin.Frame(b.name, joint_id, body_place, pin.BODY))  # the link's frame
         joint_of[i], placement[i] = joint_id, body_place
     pm.gravity = pin.Motion(np.asarray(nm.gravity, dtype=float), np.zeros(3))
     if pm.nv != nm.dof or pm.nq != (nm.nq or nm.dof):

@@ -128,7 +128,7 @@ class Dynamics:
     def frames(self) -> list[str]:
         """Every frame's name: each link of the description (those merged into a body by
         fixed joints too, e.g. a tool flange or a foot) and each joint."""
-        return [name for name, _ in self.info.frames]
+        return [name for name, _, _ in self.info.frames]
 
     def frame_placement(self, q, frame, p=None) -> tuple[np.ndarray, np.ndarray]:
         """(R, p): the frame's orientation (world components of its axes, (3, 3)) and its
