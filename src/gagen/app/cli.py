@@ -13,6 +13,7 @@ import logging
 import math
 import sys
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -98,6 +99,9 @@ def _add_model(p: argparse.ArgumentParser) -> None:
     p.add_argument("--strict", action="store_true",
                    help="refuse an inertia slightly off physical (CAD round-off), which "
                    "otherwise loads with a warning")
+    p.add_argument("--floating-base", action="store_true",
+                   help="a URDF's root link moves freely (a floating joint to the world, as "
+                   "Pinocchio's FreeFlyer; model files and MJCF declare theirs)")
 
 
 def _add_cache_dir(p: argparse.ArgumentParser) -> None:
@@ -243,7 +247,7 @@ def build_command(args: argparse.Namespace) -> int:
     from ..build.builder import build
     from ..model.resolve import resolve_model
 
-    model = resolve_model(args.model, strict=args.strict)
+    model = resolve_model(args.model, strict=args.strict, floating_base=args.floating_base)
     out = Path(args.out) if args.out else (Path("generated") / model.name if args.model == "rrr"
                                            else None)
     start = time.perf_counter()
@@ -262,12 +266,17 @@ def info_command(args: argparse.Namespace) -> int:
     """A model's coordinates, parameters and the API of its dynamics object."""
     from ..model.resolve import resolve_model
 
-    model = resolve_model(args.model, strict=args.strict)
+    model = resolve_model(args.model, strict=args.strict, floating_base=args.floating_base)
     print(f"model        {model.name}  ({model.source})")
     if model.description:
         print(f"description  {model.description}")
     print(f"bodies       {len(model.bodies)}")
+    if model.nq != model.nv:
+        print(f"q            {model.nq}: {', '.join(model.configuration)}")
     print(f"coordinates  {model.dof}: {', '.join(model.coordinates)}")
+    frames = [f.name for f in model.frames]
+    shown = ", ".join(frames[:8]) + (", ..." if len(frames) > 8 else "")
+    print(f"frames       {len(frames)}: {shown}")
     print("parameters")
     for name, value in model.parameters.items():
         print(f"  {name:<24} {value:g}")
@@ -309,7 +318,7 @@ def simulate_command(args: argparse.Namespace) -> int:
                        rtol=args.rtol, atol=args.atol, step=args.step,
                        target=_flat(args.target), kp=_flat(args.kp), kd=_flat(args.kd),
                        gravity_compensation=not args.no_gravity_compensation, gif=args.gif,
-                       strict=args.strict)
+                       strict=args.strict, floating_base=args.floating_base)
     print_simulate_report(run)
     return 0
 
@@ -320,7 +329,7 @@ def inverse_command(args: argparse.Namespace) -> int:
 
     run = run_inverse(args.model, duration=args.duration, points=args.points, out=args.out,
                       backend=args.backend, cache_dir=args.cache_dir, qf=_flat(args.qf),
-                      strict=args.strict)
+                      strict=args.strict, floating_base=args.floating_base)
     print_inverse_report(run)
     return 0
 
@@ -481,7 +490,9 @@ def main(argv: list[str] | None = None) -> int:
 
     args = parser().parse_args(argv)
     try:
-        with showing_progress(level=logging.WARNING if args.quiet else logging.INFO):
+        with showing_progress(level=logging.WARNING if args.quiet else logging.INFO), \
+                warnings.catch_warnings():
+            warnings.showwarning = _warning_line
             return COMMANDS[args.command].run(args)
     except KeyboardInterrupt:
         print("gagen: interrupted", file=sys.stderr)
@@ -492,6 +503,11 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"gagen: error: {_one_line(exc)}", file=sys.stderr)
         return code
+
+
+def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as the CLI shows it: one line `gagen: warning: ...` on stderr."""
+    print(f"gagen: warning: {message}", file=sys.stderr)
 
 
 def _one_line(exc: BaseException) -> str:

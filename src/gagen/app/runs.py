@@ -82,6 +82,20 @@ def to_model_units(values: Sequence[float], model) -> np.ndarray:
     return out
 
 
+def _joints_only(model) -> _JointView:
+    return _JointView(model)
+
+
+class _JointView:
+    """What figures read of a model (name, coordinates, moving bodies), its joints only."""
+
+    def __init__(self, model):
+        self.name = model.name
+        self.moving_bodies = [b for b in model.moving_bodies if not b.joint.floating]
+        self.coordinates = [b.joint.name for b in self.moving_bodies]
+        self.dof = len(self.coordinates)
+
+
 def shown(values: np.ndarray, model) -> str:
     """Coordinates as the user reads them: 'q1 = -60.000 deg, d2 = 0.0500 m'."""
     parts = []
@@ -119,12 +133,12 @@ def output_folder(out: str | Path | None, model) -> Path:
 
 
 def load_dynamics(model, backend: str = "compiled", cache_dir: str | Path | None = None,
-                  strict: bool = False):
+                  strict: bool = False, floating_base: bool = False):
     """(Model, dynamics) of a model as the user names it, with progress on the log."""
     from ..loading import load
     from ..model.resolve import resolve_model
 
-    resolved = resolve_model(model, strict)
+    resolved = resolve_model(model, strict, floating_base)
     log.info(f"loading '{resolved.name}' ({resolved.dof} coordinates) with the {backend} "
              "backend (the first compiled build of a model takes a few seconds)...")
     start = time.perf_counter()
@@ -143,8 +157,12 @@ def run_simulate(model="rrr", *, duration: float = 5.0, points: int = 501,
                  rtol: float = 1e-6, atol: float = 1e-8, step: float = 1e-3,
                  target: Sequence[float] | None = None, kp: Sequence[float] | None = None,
                  kd: Sequence[float] | None = None, gravity_compensation: bool = True,
-                 gif: bool = False, strict: bool = False) -> SimulateRun:
+                 gif: bool = False, strict: bool = False,
+                 floating_base: bool = False) -> SimulateRun:
     """Direct dynamics from rest at q = 0 under a PD law; writes the CSV and figures.
+
+    A floating base starts at the world's origin, unrotated; the PD law drives the joints
+    (a floating joint has no actuator), and the figures show the joints.
 
     `target` is in degrees (metres for prismatic joints); `target`, `kp`, `kd` each one
     value or one per coordinate, the controller's defaults (see the module) where None.
@@ -158,7 +176,7 @@ def run_simulate(model="rrr", *, duration: float = 5.0, points: int = 501,
     if method in COMPILED_METHODS and backend != "compiled":
         raise ValueError(f"--method {method} needs --backend compiled; use a scipy method "
                          "(e.g. RK45) with the lambdify backend")
-    model, dyn = load_dynamics(model, backend, cache_dir, strict)
+    model, dyn = load_dynamics(model, backend, cache_dir, strict, floating_base)
     controller = default_controller(dyn)
     if target is not None or kp is not None or kd is not None or not gravity_compensation:
         controller = PD(kp=controller.kp if kp is None else np.asarray(kp, dtype=float),
@@ -170,7 +188,7 @@ def run_simulate(model="rrr", *, duration: float = 5.0, points: int = 501,
     log.info(f"controller {which}: {controller!r}")
     options = {"h": step} if method == "rk4" else {}
     log.info(f"simulating {duration:g} s with {method} (rtol={rtol:g}, atol={atol:g})...")
-    result = simulate(dyn, (0.0, duration), np.zeros(dyn.n), np.zeros(dyn.n),
+    result = simulate(dyn, (0.0, duration), dyn.neutral(), np.zeros(dyn.n),
                       controller=controller, method=method, rtol=rtol, atol=atol,
                       t_eval=np.linspace(0.0, duration, points), **options)
     run = SimulateRun(model, dyn.backend, method, result)
@@ -179,6 +197,15 @@ def run_simulate(model="rrr", *, duration: float = 5.0, points: int = 501,
     log.info("plotting...")
     from .figures import arm_gif, fig2_positions, fig3_arm
 
+    if model.floating:
+        from ..runtime.manifold import plain_entries
+
+        plain_q, _ = plain_entries(dyn.info)
+        run.files.append(fig2_positions(result.t, result.q[:, plain_q], _joints_only(model),
+                                        folder / "fig2_positions.png"))
+        log.info("no arm figure or animation for a floating base (the CSV has the base's "
+                 "path)")
+        return run
     run.files.append(fig2_positions(result.t, result.q, model, folder / "fig2_positions.png"))
     run.files.append(fig3_arm(model, result.q, folder / "fig3_arm.png", t=result.t))
     if gif:
@@ -193,7 +220,17 @@ def print_simulate_report(run: SimulateRun) -> None:
     print(f"gagen: simulation wall time {duration_text(st['wall_time'])} ({run.method}, "
           f"{run.backend} backend): {st['steps']} steps, {st['nfev']} right-hand side "
           "evaluations")
-    print(f"gagen: final position: {shown(run.result.q[-1], run.model)}")
+    final = run.result.q[-1]
+    if run.model.floating:
+        base = ", ".join(f"{name} = {value:.4f} m" for name, value in
+                         zip(run.model.configuration[:3], final[:3]))
+        joints = [k for k, name in enumerate(run.model.configuration)
+                  if name in run.model.coordinates]
+        print(f"gagen: final base position: {base}")
+        final, shown_model = final[joints], _joints_only(run.model)
+    else:
+        shown_model = run.model
+    print(f"gagen: final position: {shown(final, shown_model)}")
     for f in run.files:
         print(f"gagen: wrote {f}")
 
@@ -204,7 +241,8 @@ def print_simulate_report(run: SimulateRun) -> None:
 def run_inverse(model="rrr", *, duration: float = 5.0, points: int = 501,
                 out: str | Path | None = None, backend: str = "compiled",
                 cache_dir: str | Path | None = None,
-                qf: Sequence[float] | None = None, strict: bool = False) -> InverseRun:
+                qf: Sequence[float] | None = None, strict: bool = False,
+                floating_base: bool = False) -> InverseRun:
     """Inverse dynamics along eq. 11 from q = 0 to `qf` (degrees, metres for prismatic
     joints; one value or one per coordinate; None: the default target) in `duration` s.
     `strict` refuses an inertia slightly off physical (gagen.load)."""
@@ -213,7 +251,11 @@ def run_inverse(model="rrr", *, duration: float = 5.0, points: int = 501,
     from ..sim.trajectory import Eq11Trajectory
     from .figures import fig4_inverse
 
-    model, dyn = load_dynamics(model, backend, cache_dir, strict)
+    model, dyn = load_dynamics(model, backend, cache_dir, strict, floating_base)
+    if model.floating:
+        raise ValueError("eq. 11 moves every coordinate along a line from q = 0; a floating "
+                         "base is not a coordinate on a line (inverse dynamics along a "
+                         "trajectory of your own: gagen.inverse_dynamics_along)")
     final = default_target(model) if qf is None else to_model_units(qf, model)
     trajectory = Eq11Trajectory(np.zeros(dyn.n), final, duration)
     log.info(f"eq. 11 from q = 0 to {shown(final, model)} in Tp = {duration:g} s")
