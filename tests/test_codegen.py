@@ -111,7 +111,7 @@ int main(void) {
     const double kp[3] = {500, 300, 200}, kd[3] = {300, 150, 100};
     const double target[3] = {-1.0471975511965976, -1.0471975511965976, -0.5235987755982988};
     const gagen_control law = {GAGEN_CTRL_PD, kp, kd, target, 1, NULL, NULL, 0.0,
-                                NULL, NULL};
+                                NULL, NULL, NULL, 0, NULL, NULL};
     const double y0[6] = {0}, atol[6] = {1e-8, 1e-8, 1e-8, 1e-8, 1e-8, 1e-8}, t_end = 1.0;
     double y[6];
     gagen_ode_stats stats;

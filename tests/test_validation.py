@@ -90,7 +90,7 @@ CASES = [
     ("duplicate body name", {"bodies__2__name": "link1"}, "body 'link1'", r"duplicate body name"),
     ("world as a body", {"bodies__0__name": "world"}, "body 'world'", r"'world' is reserved"),
     ("duplicate coordinate", {"bodies__2__joint__name": "q1"}, "body 'link3', joint 'q1'",
-     r"duplicate coordinate name \(also used by body 'link1'\)"),
+     r"duplicate coordinate name 'q1' \(also used by body 'link1'\)"),
     # undeclared symbols, wherever they are
     ("undeclared in com", {"bodies__1__com": [0, "L/2 + zz", 0]}, "body 'link2', com[1]",
      r"undeclared symbol zz \(declare it under 'parameters'\)"),
@@ -122,7 +122,8 @@ CASES = [
     ("zero axis through a parameter", {"parameters__a": 0.0}, "body 'link2', joint 'q2'",
      r"zero joint axis"),
     ("unknown joint type", {"bodies__1__joint__type": "ball"}, "body 'link2', joint",
-     r"unknown joint type 'ball' \(expected one of revolute, continuous, prismatic, fixed\)"),
+     r"unknown joint type 'ball' \(expected one of revolute, continuous, prismatic, fixed, "
+     r"floating\)"),
     # parameters
     ("non-numeric default", {"parameters__g": "abc"}, "parameter 'g'",
      r"default value 'abc' is not a number"),

@@ -5,7 +5,9 @@
  *
  * A model's generated simulation.c includes this file once, after defining
  *
- *   GAGEN_SO_NQ        the number of coordinates n (a constant: the loops unroll)
+ *   GAGEN_SO_NQ        the size of q (constants: the loops unroll)
+ *   GAGEN_SO_NV        the number of velocity coordinates, the size of qd (NQ exceeds it by
+ *                      one per floating joint, whose orientation is a quaternion)
  *   GAGEN_SO_NS        the size of a position stage S (doubles)
  *   GAGEN_SO_GRAVITY   where the gravity torques g(q) start in S
  *   static int  gagen_so_position(const double *q, const double *p, double *S);
@@ -17,12 +19,21 @@
  *   static void gagen_so_gravity(const double *q, const double *p, double *G);
  *   static void gagen_so_inverse(const double *q, const double *qd, const double *qdd,
  *                                const double *p, double *tau);
+ *   static void gagen_so_qdot(const double *q, const double *qd, double *dq);
+ *                      dq/dt: qd itself, but for floating joints (a quaternion's rate)
+ *   static void gagen_so_error(const double *q, const double *target, double *e);
+ *                      a PD law's error per velocity coordinate (0 for floating joints)
+ *   static void gagen_so_unactuated(double *u);
+ *                      zeroes the torques no actuator gives: a floating joint's wrench
+ *   static void gagen_so_wrenches(const double *q, const double *p, int count,
+ *                                 const int *frames, const double *wrenches, double *u);
+ *                      adds J^T w of wrenches on frames (gagen_control's nframes ...)
  *
  * and gets gagen_so_dopri5, gagen_so_rk4 and gagen_so_torques.
  *
  * Why a second-order form: each integrator stage needs qdd at a new state, and the
  * positions of stage s + 1 are known as soon as the velocities of stage s are, before its
- * accelerations: dq/dt = qd.  So stage s + 1's position stage (sin, cos, the mass matrix
+ * accelerations: dq/dt = qd (for a floating joint a function of q and qd).  So stage s + 1's position stage (sin, cos, the mass matrix
  * and its factorisation) is computed while stage s's velocity stage runs, instead of after
  * it; and with the state size a constant and the stages written out, the integrator's own
  * loops unroll.  The arithmetic is gagen_ode.h's, the same as the generic gagen_dopri5 and
@@ -45,21 +56,24 @@
 #define GAGEN_SO_INLINE static inline
 #endif
 
-#define GAGEN_SO_NY (2 * GAGEN_SO_NQ)
+#define GAGEN_SO_NY (GAGEN_SO_NQ + GAGEN_SO_NV)
 
 /* A gagen_control read once: its arrays copied, NULL ones as zeros. */
 typedef struct {
     int kind, gravity_compensation;
-    double kp[GAGEN_SO_NQ], kd[GAGEN_SO_NQ], target[GAGEN_SO_NQ];
+    double kp[GAGEN_SO_NV], kd[GAGEN_SO_NV], target[GAGEN_SO_NV], ff[GAGEN_SO_NV];
     double q0[GAGEN_SO_NQ], qf[GAGEN_SO_NQ], Tp;
+    int nframes;
+    const int *frames;
+    const double *wrenches;
     gagen_poll_fn poll;
     void *poll_ctx;
 } gagen_so_law;
 
-static void gagen_so_copy_or_zero(const double *src, double *dst)
+static void gagen_so_copy_or_zero(const double *src, double *dst, int n)
 {
     int i;
-    for (i = 0; i < GAGEN_SO_NQ; ++i) dst[i] = src ? src[i] : 0.0;
+    for (i = 0; i < n; ++i) dst[i] = src ? src[i] : 0.0;
 }
 
 /* Reads c into law; GAGEN_ERR_BAD_ARG for an unknown controller or one that lacks data. */
@@ -71,13 +85,23 @@ static int gagen_so_law_init(gagen_so_law *law, const gagen_control *c)
         return GAGEN_ERR_BAD_ARG;
     if (c->kind == GAGEN_CTRL_COMPUTED_TORQUE && (c->traj_q0 == NULL || c->traj_qf == NULL))
         return GAGEN_ERR_BAD_ARG;
+    /* eq. 11 moves every coordinate along a line: no floating joint */
+    if (c->kind == GAGEN_CTRL_COMPUTED_TORQUE && GAGEN_SO_NQ != GAGEN_SO_NV)
+        return GAGEN_ERR_BAD_ARG;
     law->kind = c->kind;
     law->gravity_compensation = c->kind == GAGEN_CTRL_PD && c->gravity_compensation;
-    gagen_so_copy_or_zero(c->kp, law->kp);
-    gagen_so_copy_or_zero(c->kd, law->kd);
-    gagen_so_copy_or_zero(c->target, law->target);
-    gagen_so_copy_or_zero(c->traj_q0, law->q0);
-    gagen_so_copy_or_zero(c->traj_qf, law->qf);
+    gagen_so_copy_or_zero(c->kp, law->kp, GAGEN_SO_NV);
+    gagen_so_copy_or_zero(c->kd, law->kd, GAGEN_SO_NV);
+    gagen_so_copy_or_zero(c->target, law->target, GAGEN_SO_NV);
+    gagen_so_copy_or_zero(c->traj_q0, law->q0, GAGEN_SO_NQ);
+    gagen_so_copy_or_zero(c->traj_qf, law->qf, GAGEN_SO_NQ);
+    gagen_so_copy_or_zero(c->kind == GAGEN_CTRL_PD ? c->feedforward : NULL, law->ff,
+                          GAGEN_SO_NV);
+    if (c->nframes < 0 || (c->nframes > 0 && (c->frames == NULL || c->wrenches == NULL)))
+        return GAGEN_ERR_BAD_ARG;
+    law->nframes = c->nframes;
+    law->frames = c->frames;
+    law->wrenches = c->wrenches;
     law->Tp = c->traj_Tp;
     law->poll = c->poll;
     law->poll_ctx = c->poll_ctx;
@@ -136,29 +160,33 @@ GAGEN_SO_INLINE void gagen_so_control(const gagen_so_law *law, const double *p, 
 {
     int i;
     if (law->kind == GAGEN_CTRL_PD) {
-        for (i = 0; i < GAGEN_SO_NQ; ++i)
-            u[i] = -law->kp[i] * (q[i] - law->target[i]) - law->kd[i] * qd[i];
+        double e[GAGEN_SO_NV];
+        gagen_so_error(q, law->target, e);
+        for (i = 0; i < GAGEN_SO_NV; ++i)
+            u[i] = law->ff[i] - law->kp[i] * e[i] - law->kd[i] * qd[i];
         if (law->gravity_compensation)
-            for (i = 0; i < GAGEN_SO_NQ; ++i) u[i] += G[i];
+            for (i = 0; i < GAGEN_SO_NV; ++i) u[i] += G[i];
+        gagen_so_unactuated(u);
     } else if (law->kind == GAGEN_CTRL_COMPUTED_TORQUE) {
+        /* only when every coordinate is a plain number (gagen_so_law_init): NQ = NV */
         double qr[GAGEN_SO_NQ], qdr[GAGEN_SO_NQ], v[GAGEN_SO_NQ];
         gagen_so_eq11(law, t, qr, qdr, v);
-        for (i = 0; i < GAGEN_SO_NQ; ++i)
+        for (i = 0; i < GAGEN_SO_NV; ++i)
             v[i] = v[i] + law->kd[i] * (qdr[i] - qd[i]) + law->kp[i] * (qr[i] - q[i]);
         gagen_so_inverse(q, qd, v, p, u);
     } else {
-        for (i = 0; i < GAGEN_SO_NQ; ++i) u[i] = 0.0;
+        for (i = 0; i < GAGEN_SO_NV; ++i) u[i] = 0.0;
     }
 }
 
-/* k = dy/dt = (qd, qdd) at (t, y), S being the position stage of y's q. */
+/* k = dy/dt = (dq/dt, qdd) at (t, y), S being the position stage of y's q. */
 GAGEN_SO_INLINE void gagen_so_derivative(const gagen_so_law *law, const double *p, double t,
                                          const double *S, const double *y, double *k)
 {
-    double u[GAGEN_SO_NQ];
-    int i;
+    double u[GAGEN_SO_NV];
     gagen_so_control(law, p, t, y, y + GAGEN_SO_NQ, S + GAGEN_SO_GRAVITY, u);
-    for (i = 0; i < GAGEN_SO_NQ; ++i) k[i] = y[GAGEN_SO_NQ + i];
+    if (law->nframes > 0) gagen_so_wrenches(y, p, law->nframes, law->frames, law->wrenches, u);
+    gagen_so_qdot(y, y + GAGEN_SO_NQ, k);
     gagen_so_velocity(S, y, y + GAGEN_SO_NQ, u, p, k + GAGEN_SO_NQ);
 }
 
@@ -188,7 +216,7 @@ GAGEN_SO_INLINE int gagen_so_dp_stage(int s, const gagen_so_law *law, const doub
     double *k = K + s * NY;
     int i, rc;
     gagen_dp_stage_input(NY, NQ, NY, s, K, y, h, ytmp);
-    for (i = 0; i < NQ; ++i) k[i] = ytmp[NQ + i];
+    gagen_so_qdot(ytmp, ytmp + NQ, k);
     if (s + 1 < GAGEN_DP_NSTAGES)
         gagen_dp_stage_input(NY, 0, NQ, s + 1, K, y, h, y_new);
     else
@@ -324,12 +352,12 @@ GAGEN_SO_INLINE int gagen_so_rk4_stage(const gagen_so_law *law, const double *p,
     enum { NQ = GAGEN_SO_NQ, NY = GAGEN_SO_NY };
     double stage[NY];
     int i;
-    for (i = 0; i < NQ; ++i) {
-        stage[i] = q[i];
-        stage[NQ + i] = y[NQ + i] + a * dt * k_prev[NQ + i];
+    for (i = 0; i < NQ; ++i) stage[i] = q[i];
+    for (i = NQ; i < NY; ++i) stage[i] = y[i] + a * dt * k_prev[i];
+    if (b != 0) {
+        gagen_so_qdot(stage, stage + NQ, k);
+        for (i = 0; i < NQ; ++i) q_next[i] = y[i] + b * dt * k[i];
     }
-    if (b != 0)
-        for (i = 0; i < NQ; ++i) q_next[i] = y[i] + b * dt * stage[NQ + i];
     gagen_so_derivative(law, p, ts, S, stage, k);
     return gagen_so_position(q_next, p, S_next);
 }
@@ -394,8 +422,9 @@ static int gagen_so_rk4(const gagen_control *c, const double *p, double t0, doub
                                      q4, Sa);
         ++st.nfev;
         if ((rc = pending) != 0) break;
-        /* y_new's positions need k4's position half, the velocities of stage 4 */
-        for (i = 0; i < NQ; ++i) k4[i] = y[NQ + i] + dt * k3[NQ + i];
+        /* y_new's positions need k4's position half, dq/dt at stage 4's state */
+        for (i = NQ; i < NY; ++i) k4[i] = y[i] + dt * k3[i];
+        gagen_so_qdot(q4, k4 + NQ, k4);
         gagen_rk4_solution(0, NQ, y, dt, k1, k2, k3, k4, y_new);
         pending = gagen_so_rk4_stage(&law, p, t_new, 1.0, 0.0, dt, y, k3, q4, Sa, k4, y_new,
                                      Sb);
@@ -427,20 +456,21 @@ static int gagen_so_rk4(const gagen_control *c, const double *p, double t0, doub
     return gagen_finish(stats, &st, rc, y_out, ie, n_eval, NY);
 }
 
-/* The controller's torques at m samples: times t (m), states y (m x 2n), tau (m x n). */
+/* The controller's torques at m samples: times t (m), states y (m x (nq + nv)), tau
+ * (m x nv). */
 static int gagen_so_torques(const gagen_control *c, const double *p, long m, const double *t,
                             const double *y, double *tau)
 {
     gagen_so_law law;
-    double G[GAGEN_SO_NQ];
+    double G[GAGEN_SO_NV];
     long r;
     int i, rc = gagen_so_law_init(&law, c);
     if (rc != GAGEN_OK) return rc;
-    for (i = 0; i < GAGEN_SO_NQ; ++i) G[i] = 0.0;
+    for (i = 0; i < GAGEN_SO_NV; ++i) G[i] = 0.0;
     for (r = 0; r < m; ++r) {
         const double *q = y + r * GAGEN_SO_NY;
         if (law.gravity_compensation) gagen_so_gravity(q, p, G);
-        gagen_so_control(&law, p, t[r], q, q + GAGEN_SO_NQ, G, tau + r * GAGEN_SO_NQ);
+        gagen_so_control(&law, p, t[r], q, q + GAGEN_SO_NQ, G, tau + r * GAGEN_SO_NV);
     }
     return GAGEN_OK;
 }

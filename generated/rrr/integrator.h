@@ -110,6 +110,14 @@ typedef struct {
      * nonzero return stops it with GAGEN_ERR_INTERRUPTED (Python's Ctrl-C uses this). */
     gagen_poll_fn poll;
     void *poll_ctx;
+    /* Optional (NULL: zeros): PD's constant feed-forward torques, added to its output */
+    const double *feedforward;
+    /* Optional (0: none): constant wrenches on frames, (force, torque) in world axes at the
+     * frames' origins, wrenches[6 k .. 6 k + 5] on frame frames[k]; their generalised force
+     * J^T w acts with the controller's torques (and is not part of them) */
+    int nframes;
+    const int *frames;
+    const double *wrenches;
 } gagen_control;
 
 #ifdef __cplusplus

@@ -7,6 +7,14 @@
  *   [1] = q2
  *   [2] = q3
  *
+ * Frames (6), numbered for the frame functions below:
+ *   [0] = link1
+ *   [1] = q1
+ *   [2] = link2
+ *   [3] = q2
+ *   [4] = link3
+ *   [5] = q3
+ *
  * Parameter layout, p[16] (defaults in brackets):
  *   p[0] = g [9.81]
  *   p[1] = L1 [0.4]
@@ -31,6 +39,7 @@
 #include "integrator.h"
 
 #define RRR_NQ 3
+#define RRR_NV 3
 #define RRR_NP 16
 /* returned by rrr_forward_dynamics when M(q) is singular or not positive definite */
 #define RRR_ERR_NOT_POSITIVE_DEFINITE 1
@@ -76,6 +85,31 @@ int rrr_control_torques(const gagen_control *c, const double *p, long m,
                                 const double *t, const double *y, double *tau);
 /* TV[0] = kinetic energy, TV[1] = potential energy (zero at the world origin) */
 void rrr_energy(const double *q, const double *qd, const double *p, double *TV);
+
+/* Frames (Pinocchio's LOCAL_WORLD_ALIGNED: linear velocity of the frame's origin, then the
+ * angular velocity, in world axes; wrenches are (force, torque) in world axes at the frame's
+ * origin). Those taking a frame number return 0, or GAGEN_ERR_BAD_ARG for a bad number. */
+#define RRR_NFRAMES 6
+/* X: per body (15 each) R row-major, origin, joint axis, all in the world */
+void rrr_placements(const double *q, const double *p, double *X);
+/* F: per frame (12 each) its axes (row-major) and origin in its body's frame */
+void rrr_frame_offsets(const double *p, double *F);
+int rrr_frame_placement(const double *q, const double *p, int frame, double *R,
+                                double *pos);
+/* J: 6 x 3, row-major */
+int rrr_frame_jacobian(const double *q, const double *p, int frame, double *J);
+int rrr_frame_velocity(const double *q, const double *qd, const double *p, int frame,
+                               double *v);
+/* tau += sum over k < count of J(frames[k])^T wrenches[6 k .. 6 k + 5] */
+int rrr_frame_forces(const double *q, const double *p, int count, const int *frames,
+                             const double *wrenches, double *tau);
+/* forward and inverse dynamics with those wrenches acting (returns as forward_dynamics) */
+int rrr_forward_dynamics_ext(const double *q, const double *qd, const double *tau,
+                                     const double *p, int count, const int *frames,
+                                     const double *wrenches, double *qdd);
+int rrr_inverse_dynamics_ext(const double *q, const double *qd, const double *qdd,
+                                     const double *p, int count, const int *frames,
+                                     const double *wrenches, double *tau);
 
 #ifdef __cplusplus
 }

@@ -229,7 +229,34 @@ static void gagen_so_inverse(const double *q, const double *qd, const double *qd
     rrr_inverse_dynamics(q, qd, qdd, p, tau);
 }
 
+static inline void gagen_so_qdot(const double *restrict q, const double *restrict qd,
+                                 double *restrict dq)
+{
+    int i;
+    for (i = 0; i < 3; ++i) dq[i] = qd[i];
+    (void)q;
+}
+
+static inline void gagen_so_error(const double *q, const double *target, double *e)
+{
+    int i;
+    for (i = 0; i < 3; ++i) e[i] = q[i] - target[i];
+}
+
+static inline void gagen_so_unactuated(double *u)
+{
+    (void)u;
+}
+
+/* constant wrenches on frames, as generalised forces (frames.c) */
+static void gagen_so_wrenches(const double *q, const double *p, int count, const int *frames,
+                              const double *wrenches, double *u)
+{
+    rrr_frame_forces(q, p, count, frames, wrenches, u);
+}
+
 #define GAGEN_SO_NQ 3
+#define GAGEN_SO_NV 3
 #define GAGEN_SO_NS 38
 #define GAGEN_SO_GRAVITY 23
 #include "gagen_second_order.h"
@@ -249,10 +276,10 @@ GAGEN_KERNEL
 int rrr_forward_dynamics_gc(const double *q, const double *qd, const double *u,
                                     const double *p, double *qdd)
 {
-    double S[GAGEN_SO_NS], w[GAGEN_SO_NQ];
+    double S[GAGEN_SO_NS], w[GAGEN_SO_NV];
     int i, rc = gagen_so_position(q, p, S);
     if (rc != 0) return rc;
-    for (i = 0; i < GAGEN_SO_NQ; ++i) w[i] = u[i] + S[GAGEN_SO_GRAVITY + i];
+    for (i = 0; i < GAGEN_SO_NV; ++i) w[i] = u[i] + S[GAGEN_SO_GRAVITY + i];
     gagen_so_velocity(S, q, qd, w, p, qdd);
     return 0;
 }

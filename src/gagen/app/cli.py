@@ -280,7 +280,7 @@ def info_command(args: argparse.Namespace) -> int:
     print("parameters")
     for name, value in model.parameters.items():
         print(f"  {name:<24} {value:g}")
-    _print_methods(model.dof)
+    _print_methods(model.dof, model.nq)
     return 0
 
 
@@ -293,6 +293,13 @@ _METHODS = (
     ("inverse_dynamics(q, qd, qdd)", "tau: ({n},)"),
     ("gravity(q)", "tau that holds q at rest: ({n},)"),
     ("energy(q, qd)", "(kinetic, potential)"),
+    ("neutral()", "q with every coordinate 0, every quaternion the identity: ({nq},)"),
+    ("integrate(q, v, dt)", "q moved by v dt (Pinocchio's integrate): ({nq},)"),
+    ("difference(q0, q1)", "v with integrate(q0, v) = q1: ({n},)"),
+    ("frame_placement(q, frame)", "(R, p): (3, 3), (3,) in the world"),
+    ("frame_velocity(q, qd, frame)", "linear, angular (world axes): (6,)"),
+    ("frame_jacobian(q, frame)", "LOCAL_WORLD_ALIGNED: (6, {n})"),
+    ("external_forces(q, fext)", "sum of J^T w of wrenches {{frame: w}}: ({n},)"),
     ("inverse_dynamics_derivatives(q, qd, qdd) *", "(dtau_dq, dtau_dqd): ({n}, {n}) each"),
     ("forward_dynamics_derivatives(q, qd, tau) *",
      "(dqdd_dq, dqdd_dqd, dqdd_dtau = M^-1): ({n}, {n}) each"),
@@ -301,11 +308,11 @@ _METHODS = (
 )
 
 
-def _print_methods(n: int) -> None:
+def _print_methods(n: int, nq: int) -> None:
     """The API of `gagen.load(model)` with this model's array shapes."""
     print("methods      dyn = gagen.load(MODEL); stacked (N, ...) inputs give stacked outputs")
     for call, returns in _METHODS:
-        print(f"  {call:<44} {returns.format(n=n, m=2 * n)}")
+        print(f"  {call:<44} {returns.format(n=n, m=2 * n, nq=nq)}")
     print('  * backend="lambdify" for now; the compiled backend gets them in the next step')
 
 

@@ -197,6 +197,14 @@ def markdown(results: dict, images: dict | None = None) -> str:
         results, "panda", "Per call on the Panda (9 coordinates: 7 arm joints and 2 fingers, from its URDF)",
         f"gagen compiled against Pinocchio's own URDF parse, {pa.get('repeats', '?')} "
         "interleaved repeats; ratios to gagen compiled.", percall_table, None, images)
+    fl = results.get("floating", {})
+    lines += _section(
+        results, "floating", "Floating bases per call: ANYmal C and Talos",
+        "Pinocchio's FreeFlyer on its own URDF parse (`aba`, `rnea`, `crba`, "
+        "`computeFrameJacobian` of a foot, LOCAL_WORLD_ALIGNED) and MuJoCo's `mj_forward` on "
+        "the same URDF with a floating joint and no contacts (kinematics, M, bias forces and "
+        f"qacc in one call), {fl.get('repeats', '?')} interleaved repeats; ratios to gagen.",
+        percall_table, None, images)
     sc = results.get("scaling", {})
     lines += _section(
         results, "scaling", "Scaling: build and call time against the robot's size",

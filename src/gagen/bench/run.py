@@ -22,7 +22,7 @@ import numpy as np
 
 from .common import PANDA, Progress, compiled, find_urdf_dir, machine_info, optional
 
-SECTIONS = ("percall", "batched", "simulation", "throughput", "scaling", "panda")
+SECTIONS = ("percall", "batched", "simulation", "throughput", "scaling", "panda", "floating")
 
 
 @dataclass
@@ -231,6 +231,20 @@ class Bench:
                             loaded=self.loaded, cpp=s.mode == "full")
         return {"rows": rows, "repeats": s.scaling_repeats}
 
+    def floating(self) -> dict:
+        from .common import PANDA
+        from .floating import floating_rows
+
+        s = self.settings
+        folder = find_urdf_dir(self.urdf_dir, needed=PANDA)
+        if folder is None:
+            note = "the shared URDFs were not found: the floating-base section is skipped"
+            self.results["notes"].append(note)
+            return {"rows": [], "skipped": note}
+        rows = floating_rows(folder, self.scratch / "floating", s.panda_repeats, s.target_s,
+                             progress=lambda text: self.progress("floating", text))
+        return {"rows": rows, "repeats": s.panda_repeats}
+
     def panda(self) -> dict:
         from ..model.resolve import resolve_model
         from .percall import panda_rows
@@ -265,7 +279,8 @@ class Bench:
     def run(self) -> int:
         failed = 0
         titles = {"percall": "per call", "batched": "batched", "simulation": "simulation",
-                  "throughput": "throughput", "scaling": "scaling", "panda": "panda"}
+                  "throughput": "throughput", "scaling": "scaling", "panda": "panda",
+                  "floating": "floating"}
         try:
             if {"percall", "batched", "simulation", "throughput"} & set(self.settings.sections):
                 start = time.perf_counter()

@@ -72,7 +72,8 @@ def split(name: str, prelude: tuple[list[str], list[str]], statements: list[Stat
     lines, defined = prelude
     chunks = _chunks(statements, segment_chars)
     first = 1 if lines else 0
-    segments = [Segment(f"{name}_part{k}") for k in range(len(chunks) + first)]
+    # at least one segment: a kernel of outputs alone (constants, say) still has a place
+    segments = [Segment(f"{name}_part{k}") for k in range(max(1, len(chunks) + first))]
     where: dict[str, int] = {}           # name -> the segment defining it
     reads: list[set[str]] = [set() for _ in segments]
     if lines:
