@@ -375,8 +375,8 @@ MALFORMED = {
         "l2", inertial(inertia='ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="3"'))),
         ["link 'l2', inertial inertia", "triangle inequality"]),
     "floating joint not at the root": (urdf(joints=J() + J2.replace("revolute", "floating")),
-                                       ["joint 'j2'", "a floating joint must join a link to "
-                                        "the root link"]),
+                                       ["joint 'j2'",
+                                        "a floating joint must join a link to the root"]),
     "planar joint": (urdf(joints=J() + J2.replace("revolute", "planar")),
                      ["joint 'j2'", "'planar'", "unsupported"]),
     "unknown joint type": (urdf(joints=J() + J2.replace("revolute", "hinge")),

@@ -144,7 +144,7 @@ def _mujoco(dyn, path: Path, q, qd, tau) -> list[Candidate]:
 
 def _floating_urdf(text: str, root: str) -> str:
     """The URDF without geometry, its root link on a floating joint to a `world` link."""
-    text = re.sub(r"<(visual|collision)\b.*?</\1>", "", text, flags=re.S)
+    text = re.sub(r"<(visual|collision)\b.*?</\1>", "", text, flags=re.DOTALL)
     start = text.index("<link")
     joint = (f'<link name="world"/><joint name="floating_base" type="floating">'
              f'<parent link="world"/><child link="{root}"/></joint>')
