@@ -122,8 +122,7 @@ CASES = [
     ("zero axis through a parameter", {"parameters__a": 0.0}, "body 'link2', joint 'q2'",
      r"zero joint axis"),
     ("unknown joint type", {"bodies__1__joint__type": "ball"}, "body 'link2', joint",
-     r"unknown joint type 'ball' \(expected one of revolute, continuous, prismatic, fixed, "
-     r"floating\)"),
+     r"unknown joint type 'ball' \(expected one of revolute, .*, floating\)"),
     # parameters
     ("non-numeric default", {"parameters__g": "abc"}, "parameter 'g'",
      r"default value 'abc' is not a number"),
