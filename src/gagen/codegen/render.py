@@ -247,7 +247,7 @@ KERNEL_ARRAYS = {
 # GAGEN_KERNEL, built for CPUs with and without FMA like the unsplit kernels (gagen_math.h).
 # Measured on a 50-link chain: inverse dynamics 2.04 -> 1.54 us and forward dynamics
 # 4.84 -> 3.79 us per call, for 1.8 times their compile time.
-LOOPED_KERNELS = ("inverse_dynamics", "gravity", "position", "velocity", "velocity_aba")
+LOOPED_KERNELS = ("inverse_dynamics", "gravity", "position", "velocity", "velocity_aba", "mass_matrix")
 
 
 class _Kernels:

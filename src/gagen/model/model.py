@@ -32,21 +32,34 @@ WORLD = "world"
 
 def rotation_from_rpy(roll, pitch, yaw) -> sp.ImmutableMatrix:
     """URDF's fixed-axis roll-pitch-yaw: R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    return sp.ImmutableMatrix(_rot_z(yaw) * _rot_y(pitch) * _rot_x(roll))
+    R = _rot_z(yaw) * _rot_y(pitch) * _rot_x(roll)
+    return sp.ImmutableMatrix(R.applyfunc(lambda e: _exact_unit(float(e)) if e.is_Float else e))
+
+
+# A numeric angle within this of a multiple of pi/2 is that multiple (see _trig).
+QUARTER_TURN_TOLERANCE = 1e-9
 
 
 def _trig(angle):
+    """(cos, sin) of an angle; a number within QUARTER_TURN_TOLERANCE rad of a multiple of
+    pi/2 turns exactly that multiple. URDFs write pi/2 with 11 or 12 digits (Tiago's
+    1.57079632679, whose cosine is 4.9e-12): the intent is a quarter turn, and the residue
+    makes every rotation matrix dense (a quarter more operations in Tiago's mass matrix);
+    the change is an angle error below 1e-9 rad, far below what the file's digits carry."""
     if isinstance(angle, (int, float)) or (isinstance(angle, sp.Basic) and angle.is_Number):
         value = float(angle)
+        quarters = round(value / (math.pi / 2))
+        if abs(value - quarters * math.pi / 2) < QUARTER_TURN_TOLERANCE:
+            return ((1, 0), (0, 1), (-1, 0), (0, -1))[quarters % 4]
         return _exact_unit(math.cos(value)), _exact_unit(math.sin(value))
     return sp.cos(angle), sp.sin(angle)
 
 
 def _exact_unit(x: float) -> sp.Expr:
-    """x, with the rounding of a quarter turn removed: cos(pi/2) is 6.1e-17 in floating
-    point, not 0, and that residue makes every rotation matrix of a URDF dense (about 30 %
-    more operations in the generated code for the Panda). Entries within 1e-15 of 0 or +-1
-    become exact; the change is below the double precision of the angle itself."""
+    """x, with the rounding of floating point removed near 0 and +-1: cos(pi/2) is 6.1e-17,
+    not 0, and that residue makes rotation matrices dense (about 30 % more operations in
+    the generated code for the Panda). Entries within 1e-15 of 0 or +-1 become exact; the
+    change is below the double precision of the angle itself."""
     if abs(x) < 1e-15:
         return sp.Integer(0)
     if abs(abs(x) - 1.0) < 1e-15:
