@@ -39,7 +39,6 @@ from .kinematics import CoordinateSymbols, Recorder, joint_transform, unit_axis
 
 Vec = sp.Matrix
 ZERO = sp.zeros(3, 1)
-COMMON_FRAME_CRBA = False
 
 
 @dataclass
@@ -79,7 +78,7 @@ def derive_recursive(model: Model) -> Equations:
     nonlinear = sp.Matrix(_rnea(links, coords, rec, w, None, gravity))
     b = sp.Matrix(_rnea(links, coords, rec, w, None, None))
     Qg = -sp.Matrix(_rnea(links, coords, rec, None, None, gravity))
-    M = (_crba_common_frame if COMMON_FRAME_CRBA else _crba)(links, model.dof, rec)
+    M = _crba(links, model.dof, rec)
     tau = sp.Matrix(coords.tau)
     T, V = _energies(links, coords, rec, w, gravity)
     eqs = Equations(
@@ -255,7 +254,9 @@ def _crba(links: list[Link], n: int, rec: Recorder) -> sp.Matrix:
     Backward, each body's composite inertia (mass, first moment, inertia about O_i) gathers
     its children's, moved into its frame. Then for each joint i the composite's momentum
     for a unit rate of joint i (a spatial force) is carried to each ancestor joint j, where
-    its projection on j's axis is M_ij.
+    its projection on j's axis is M_ij. (Expressing every inertia and motion subspace once
+    in a common frame, so that M_ij is one 6-dot product, measured slower: the local
+    frames keep the joints' sparse rotations, and Talos's M took 4.2 us instead of 2.3.)
     """
     mass = [link.mass for link in links]
     h = [link.h for link in links]
@@ -292,70 +293,6 @@ def _crba(links: list[Link], n: int, rec: Recorder) -> sp.Matrix:
                     M[row, column] = M[column, row] = value
                 j, child = ancestor.parent, ancestor
     return M
-
-
-def _crba_common_frame(links: list[Link], n: int, rec: Recorder) -> sp.Matrix:
-    """The mass matrix by the CRBA in one frame per tree: M_ji = S_j . (I^c_i S_i).
-
-    Every body's inertia and every joint's motion subspace S are expressed once in its
-    tree's common frame (the world's, or a floating root's own), about that frame's origin;
-    the composite inertias are then plain sums, and each entry of M one 6-dot product,
-    where the local-frame CRBA carries each joint's momentum up through every ancestor."""
-    count = len(links)
-    Rc: list = [None] * count
-    pc: list = [None] * count
-    for i, link in enumerate(links):
-        if link.parent is None:
-            Rc[i], pc[i] = (sp.eye(3), ZERO) if link.free else (link.R, link.d)
-        else:
-            p = link.parent
-            Rc[i] = (Rc[p] * link.R).applyfunc(rec.name)
-            pc[i] = rec.vec(pc[p] + Rc[p] * link.d)
-    mass = [link.mass for link in links]
-    h: list = [None] * count
-    I_O: list = [None] * count
-    for i, link in enumerate(links):
-        h_r = rec.vec(Rc[i] * link.h)
-        d = _skew(pc[i])
-        I_r = _rotate_inertia(Rc[i], link.I_O, rec)
-        h[i] = h_r + link.mass * pc[i]
-        I_O[i] = I_r - _skew(h_r) * d - d * _skew(h_r) - link.mass * d * d
-    for i in reversed(range(count)):
-        mass[i] = rec.name(mass[i])
-        h[i] = rec.vec(h[i])
-        I_O[i] = _symmetric(I_O[i], rec)
-        p = links[i].parent
-        if p is not None:
-            mass[p], h[p], I_O[p] = mass[p] + mass[i], h[p] + h[i], I_O[p] + I_O[i]
-    motions = [_common_motions(link, Rc[i], pc[i], rec) for i, link in enumerate(links)]
-    M = sp.zeros(n, n)
-    for i, link in enumerate(links):
-        for column, (w, v) in motions[i]:
-            f = rec.vec(mass[i] * v + w.cross(h[i]))
-            m_ = rec.vec(I_O[i] * w + h[i].cross(v))
-            j: int | None = i
-            while j is not None:
-                for row, (wj, vj) in motions[j]:
-                    if row >= column or j != i:
-                        value = rec.name(wj.dot(m_) + vj.dot(f))
-                        M[row, column] = M[column, row] = value
-                j = links[j].parent
-    return M
-
-
-def _common_motions(link: Link, R: sp.Matrix, p: Vec, rec: Recorder) -> list:
-    """(coordinate, (w, v)): each of a joint's motion subspace vectors in its tree's
-    common frame, v being the velocity of the body point at the frame's origin."""
-    if link.k is None:
-        return []
-    if link.free:  # the root's own frame is the common frame
-        E = sp.eye(3)
-        return [(link.k + r, (ZERO, E[:, r])) for r in range(3)] + \
-            [(link.k + 3 + r, (E[:, r], ZERO)) for r in range(3)]
-    axis = rec.vec(R * link.axis)
-    if link.rotates:
-        return [(link.k, (axis, rec.vec(p.cross(axis))))]
-    return [(link.k, (ZERO, axis))]
 
 
 def _unit_momenta(link: Link, mass, h: Vec, I_O: sp.Matrix, rec: Recorder):
