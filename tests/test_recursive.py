@@ -114,12 +114,13 @@ def test_compiled_chain5_from_recursive_equations(tmp_path):
     assert_agree(compiled, LambdifyDynamics(derive(model)), np.random.default_rng(2))
 
 
-def test_auto_takes_the_recursive_form_from_nine_coordinates():
+def test_auto_takes_the_recursive_form_from_six_coordinates():
     from gagen.symbolic.derivation import RECURSIVE_FROM_DOF, derivation_for
 
     assert derivation_for(resolve_model("rrr")) == "gibbs-appell"
     assert derivation_for(resolve_model(f"chain:{RECURSIVE_FROM_DOF - 1}")) == "gibbs-appell"
     assert derivation_for(resolve_model(f"chain:{RECURSIVE_FROM_DOF}")) == "recursive"
+    assert RECURSIVE_FROM_DOF == 6  # benchmarks/derivation_rule.py
     assert derivation_for(resolve_model("rrr"), "recursive") == "recursive"
     with pytest.raises(ValueError, match="unknown derivation"):
         derivation_for(resolve_model("rrr"), "kane")

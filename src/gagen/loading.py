@@ -28,9 +28,10 @@ def load(model="rrr", backend: str = "compiled", strict: bool = False,
     Cython, built on first use and cached) or "lambdify" (SymPy's lambdify, no compiler).
     Options of the compiled backend: `cache_dir`, `fast_math`, `verbose` (show the build's
     progress), `portable` (one version of the kernels for any CPU, no FMA clone). Both
-    backends take `derivation`: "auto" (default: the paper's Gibbs-Appell form up to 8
-    coordinates, the recursive Newton-Euler/CRBA form from 9 on), "gibbs-appell" or
-    "recursive"; they give the same equations.
+    backends take `derivation`: "auto" (default: the paper's Gibbs-Appell form up to 5
+    coordinates, the recursive Newton-Euler/CRBA/articulated-body form from 6 on, by
+    measurement: gagen.symbolic.derivation), "gibbs-appell" or "recursive"; they give the
+    same equations.
 
     Returns a `gagen.runtime.dynamics.Dynamics`: `mass_matrix`, `forcing`,
     `forward_dynamics`, `inverse_dynamics`, `gravity`, `energy`, and the model's names.

@@ -20,13 +20,22 @@ from .gibbs_appell import Equations, derive
 from .recursive import derive_recursive
 
 DERIVATIONS = ("auto", "gibbs-appell", "recursive")
-# From this many coordinates on, "auto" takes the recursive form. Measured on this
-# project's 2-core machine (compiled, cold cache): up to 6 coordinates (rrr, UR5) neither
-# form is clearly faster per call and both build in 13-22 s; at 9 the recursive form
-# builds in about half the time (chain:9 14 s vs 27 s, Panda 14 s vs 31 s) and its
-# forward dynamics is faster per state in the batched loop (chain:9 0.47 vs 0.93 us,
-# Panda 0.71 vs 1.38 us); at 12 it builds in 18 s instead of 61 s.
-RECURSIVE_FROM_DOF = 9
+# From this many coordinates on, "auto" takes the recursive form (with the articulated-body
+# forward dynamics). Measured by benchmarks/derivation_rule.py on this project's 2-core
+# machine: both forms compiled, per call from Python and per state over 1000 stacked states,
+# interleaved; Gibbs-Appell time / recursive time (above 1: the recursive form is faster):
+#
+#   model     n  build GA/rec s   FD    ID    M    FD batched  ID batched
+#   chain:4   4   13.8 / 12.7    0.91  0.77  0.75     0.60        0.98
+#   chain:6   6   16.4 / 14.4    1.03  1.30  1.22     0.96        1.82
+#   UR5       6   16.8 / 10.6    0.93  1.03  0.61     1.13        2.06
+#   chain:7   7   18.8 / 15.5    1.02  1.93  2.22     0.99        1.15
+#   chain:9   9   26.3 / 17.8    1.30  1.70  1.50     1.55        2.77
+#   Panda     9   29.0 / 19.2    2.58  2.52  1.80     2.00        2.85
+#
+# The closed form wins at 4 coordinates (the paper's 3 too); from 6 on the recursive form
+# is faster on most kernels (geometric means 1.23 and 1.05 at 6) and always builds faster.
+RECURSIVE_FROM_DOF = 6
 
 
 def derivation_for(model: Model, derivation: str = "auto") -> str:
