@@ -31,7 +31,12 @@ from gagen.model.numeric import (  # noqa: F401 (re-exported for the tests)
     rotation_about,
     skew,
 )
-from gagen.reference.pinocchio import from_pinocchio, pinocchio_model, to_pinocchio
+from gagen.reference.pinocchio import (
+    from_pinocchio,
+    joint_forces,
+    pinocchio_model,
+    to_pinocchio,
+)
 
 
 def homogeneous(R: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -110,11 +115,13 @@ def com_world(b: NumericBody, s: BodyState) -> np.ndarray:
 
 
 def rnea(nm: NumericModel, q, qd, qdd, gravity: np.ndarray | None = None) -> np.ndarray:
-    """Generalized forces that produce accelerations qdd at (q, qd) (world-frame Newton-Euler).
+    """Generalized forces that produce accelerations qdd at (q, qd) (world-frame Newton-Euler),
+    with the joints' armature, damping and Coulomb friction added by hand.
 
     `gravity` overrides the model's gravity (the mass matrix uses zero gravity).
     """
     g = nm.gravity if gravity is None else np.asarray(gravity, dtype=float)
+    qd, qdd = np.asarray(qd, dtype=float), np.asarray(qdd, dtype=float)
     states = forward_kinematics(nm, q, qd, qdd)
     # f: force the parent applies to the body; n: moment of it about the body's origin
     f = [np.zeros(3) for _ in nm.bodies]
@@ -127,7 +134,10 @@ def rnea(nm: NumericModel, q, qd, qdd, gravity: np.ndarray | None = None) -> np.
     for i in reversed(range(len(nm.bodies))):
         b, s = nm.bodies[i], states[i]
         if b.coordinate is not None:
-            tau[b.coordinate] = s.axis @ (n[i] if b.rotates else f[i])
+            k = b.coordinate
+            # the joint terms, by hand: rotor inertia, viscous and Coulomb friction
+            tau[k] = s.axis @ (n[i] if b.rotates else f[i]) + b.armature * qdd[k] \
+                + b.damping * qd[k] + b.friction * np.sign(qd[k])
         if b.parent >= 0:
             # the child's load acts on the parent; move its moment to the parent's origin
             p = b.parent
@@ -172,6 +182,8 @@ def energy(nm: NumericModel, q, qd) -> tuple[float, float]:
         v_c = s.v + np.cross(s.omega, rc)
         I_w = s.R @ b.inertia @ s.R.T
         kinetic += 0.5 * b.mass * (v_c @ v_c) + 0.5 * (s.omega @ I_w @ s.omega)
+        if b.coordinate is not None:  # the rotor's
+            kinetic += 0.5 * b.armature * np.asarray(qd, dtype=float)[b.coordinate] ** 2
         potential -= b.mass * (nm.gravity @ (s.origin + rc))
     return float(kinetic), float(potential)
 
@@ -210,14 +222,18 @@ def pin_mass_matrix(pm: Any, q) -> np.ndarray:
 
 
 def pin_rnea(pm: Any, q, qd, qdd) -> np.ndarray:
+    """pinocchio's rnea (armature included) plus the joints' damping and friction."""
     import pinocchio as pin
 
-    return from_pinocchio(pm, pin.rnea(pm, pm.createData(), *to_pinocchio(pm, q, qd, qdd)))
+    tau = from_pinocchio(pm, pin.rnea(pm, pm.createData(), *to_pinocchio(pm, q, qd, qdd)))
+    return tau + joint_forces(pm, qd)
 
 
 def pin_forward_dynamics(pm: Any, q, qd, tau) -> np.ndarray:
+    """pinocchio's aba (armature included) under tau less the joints' damping and friction."""
     import pinocchio as pin
 
+    tau = np.asarray(tau, dtype=float) - joint_forces(pm, qd)
     return from_pinocchio(pm, pin.aba(pm, pm.createData(), *to_pinocchio(pm, q, qd, tau)))
 
 

@@ -87,7 +87,7 @@ def test_the_random_trees_have_every_joint_type():
 @pytest.mark.parametrize("case", list(CASES))
 def test_matches_pinocchio(case):
     pin = pytest.importorskip("pinocchio")
-    from gagen.reference.pinocchio import pinocchio_model, to_pinocchio
+    from gagen.reference.pinocchio import joint_forces, pinocchio_model, to_pinocchio
 
     dyn = lambdify_dynamics(case)
     rng = np.random.default_rng(11)
@@ -95,12 +95,16 @@ def test_matches_pinocchio(case):
         q, qd, qdd, tau, p = random_state(dyn, rng, vary=CASES[case][2])
         pm = pinocchio_model(dyn.model, p)
         gagen_order = functools.partial(matrix_from_pinocchio, pm)
-        qp, vp, ap, tp = to_pinocchio(pm, q, qd, qdd, tau)
+        # Pinocchio's rnea and aba (and derivatives) have the armature but not damping and
+        # friction: those act as the torque -joint_forces(qd), of derivative -damping in qd
+        qp, vp, ap, tp = to_pinocchio(pm, q, qd, qdd, tau - joint_forces(pm, qd))
         # Pinocchio returns views into its Data: copy them while each Data is alive
         data = pm.createData()
         rnea = [np.array(a) for a in pin.computeRNEADerivatives(pm, data, qp, vp, ap)]
         aba = [np.array(a) for a in pin.computeABADerivatives(pm, data, qp, vp, tp)]
         coriolis = np.array(pin.computeCoriolisMatrix(pm, data, qp, vp))
+        rnea[1] = rnea[1] + np.diag(pm.damping)
+        aba[1] = aba[1] - aba[2] @ np.diag(pm.damping)
 
         dtau_dq, dtau_dqd = dyn.inverse_dynamics_derivatives(q, qd, qdd, p)
         assert_close(dtau_dq, gagen_order(rnea[0]))
@@ -160,20 +164,25 @@ def test_matches_central_differences(case):
 @pytest.mark.parametrize("case", ["rrr", "rrr-recursive", "random1", "random12", "panda"])
 def test_coriolis_matrix_properties(case):
     """C qd = the velocity terms; Mdot - 2C is skew-symmetric, with Mdot from central
-    differences along qd; and dtau/dqd = 2C (the symmetry of the Christoffel symbols)."""
+    differences along qd; and dtau/dqd = 2C (the symmetry of the Christoffel symbols), plus
+    the joints' damping."""
     dyn = lambdify_dynamics(case)
     rng = np.random.default_rng(8)
     for _ in range(2):
         q, qd, qdd, _, p = random_state(dyn, rng, vary=CASES[case][2])
         C = dyn.coriolis_matrix(q, qd, p)
-        b = dyn.inverse_dynamics(q, qd, np.zeros(dyn.n), p) - dyn.gravity(q, p)
+        n = dyn.n  # the joints' damping and friction are not velocity terms
+        damping, friction, _ = dyn.joint_terms(p)
+        b = dyn.inverse_dynamics(q, qd, np.zeros(n), p) - dyn.gravity(q, p) \
+            - damping * qd - friction * np.sign(qd)
         assert_close(C @ qd, b)
         h = 1e-6
         Mdot = (dyn.mass_matrix(q + h * qd, p) - dyn.mass_matrix(q - h * qd, p)) / (2 * h)
         S = Mdot - 2 * C
         assert np.abs(S).max() > 1e-3 * np.abs(C).max()  # C is not simply Mdot / 2
         np.testing.assert_allclose(S + S.T, 0, atol=1e-6 * max(1.0, np.abs(Mdot).max()))
-        assert_close(dyn.inverse_dynamics_derivatives(q, qd, qdd, p)[1], 2 * C)
+        assert_close(dyn.inverse_dynamics_derivatives(q, qd, qdd, p)[1],
+                     2 * C + np.diag(damping))
 
 
 # --- the program --------------------------------------------------------------------

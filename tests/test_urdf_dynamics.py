@@ -114,11 +114,19 @@ class PinRobot:
         M = np.triu(M) + np.triu(M, 1).T  # crba fills the upper triangle
         return M[np.ix_(self.iv, self.iv)]
 
+    def joint_forces(self, qd) -> np.ndarray:
+        """The joint terms pinocchio's rnea and aba leave out, by hand from the damping and
+        friction its URDF parser read from <dynamics> (its armature is in rnea and aba)."""
+        v = self.v(qd)
+        return self.ours(self.model.damping * v + self.model.friction * np.sign(v))
+
     def forward_dynamics(self, q, qd, tau) -> np.ndarray:
-        return self.ours(pin.aba(self.model, self.data, self.q(q), self.v(qd), self.v(tau)))
+        tau = self.v(tau) - self.v(self.joint_forces(qd))
+        return self.ours(pin.aba(self.model, self.data, self.q(q), self.v(qd), tau))
 
     def inverse_dynamics(self, q, qd, qdd) -> np.ndarray:
-        return self.ours(pin.rnea(self.model, self.data, self.q(q), self.v(qd), self.v(qdd)))
+        tau = pin.rnea(self.model, self.data, self.q(q), self.v(qd), self.v(qdd))
+        return self.ours(tau) + self.joint_forces(qd)
 
     def kinetic(self, q, qd) -> float:
         return float(pin.computeKineticEnergy(self.model, self.data, self.q(q), self.v(qd)))

@@ -371,6 +371,32 @@ GAGEN_TRIG_INLINE double gagen_cos(double x)
 #endif
 }
 
+/* sign(x): -1, 0 or 1 (0 at +-0; NaN stays NaN, as NumPy's sign), for Coulomb friction. */
+static inline double gagen_sign(double x)
+{
+    return x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : x);
+}
+
+/* The smooth sign that simulations use for Coulomb friction: tanh(x / w) for a width
+ * w > 0 (within 4e-9 of sign(x) for |x| > 10 w), sign(x) for w <= 0. From |x| = 19.1 w on,
+ * tanh is +-1 to the last bit, returned without calling libm: a joint in motion (the
+ * common case) costs a division and a comparison, not a tanh. */
+static inline double gagen_smooth_sign(double x, double w)
+{
+    if (!(w > 0.0))
+        return gagen_sign(x);
+    const double y = x / w;
+    if (fabs(y) >= 19.1)
+        return y > 0.0 ? 1.0 : -1.0;
+    return tanh(y);
+}
+
+/* f * gagen_smooth_sign(x, w), and no tanh when the friction f is 0. */
+static inline double gagen_coulomb(double f, double x, double w)
+{
+    return f == 0.0 ? 0.0 : f * gagen_smooth_sign(x, w);
+}
+
 /*
  * GAGEN_KERNEL marks the kernels that run in loops (forward and inverse dynamics,
  * gravity).  Where GCC can pick a function's version when the library loads (x86-64

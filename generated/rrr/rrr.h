@@ -41,6 +41,8 @@
 #define RRR_NQ 3
 #define RRR_NV 3
 #define RRR_NP 16
+/* columns of the regressor: 10 per moving body, then damping, friction, armature per joint */
+#define RRR_NREG 39
 /* returned by rrr_forward_dynamics when M(q) is singular or not positive definite */
 #define RRR_ERR_NOT_POSITIVE_DEFINITE 1
 /* returned instead when the factorisation met NaN or inf: the state was not finite */
@@ -73,7 +75,8 @@ int rrr_forward_dynamics_gc(const double *q, const double *qd, const double *u,
  * 6 entries; first_step, max_step and max_steps as for gagen_dopri5) or
  * GAGEN_METHOD_RK4 (step h). Writes y at the n_eval times t_eval into y_out (n_eval rows of
  * 6), and returns 0, an integrator's GAGEN_ERR_*, or
- * RRR_ERR_NOT_POSITIVE_DEFINITE; on failure the rows not reached are NaN. */
+ * RRR_ERR_NOT_POSITIVE_DEFINITE; on failure the rows not reached are NaN.
+ */
 int rrr_simulate(int method, const gagen_control *c, const double *p, double t0,
                          double t1, const double *y0, double rtol, const double *atol,
                          double first_step, double max_step, long max_steps, double h,
@@ -83,6 +86,11 @@ int rrr_simulate(int method, const gagen_control *c, const double *p, double t0,
  * tau has m rows of 3. Returns 0, or GAGEN_ERR_BAD_ARG for an unknown controller. */
 int rrr_control_torques(const gagen_control *c, const double *p, long m,
                                 const double *t, const double *y, double *tau);
+/* Y (3x39, row-major): the regressor, inverse_dynamics = Y pi */
+void rrr_regressor(const double *q, const double *qd, const double *qdd,
+                           const double *p, double *Y);
+/* pi (39): the dynamic parameters at p, in the order of Y's columns */
+void rrr_regressor_parameters(const double *p, double *pi);
 /* TV[0] = kinetic energy, TV[1] = potential energy (zero at the world origin) */
 void rrr_energy(const double *q, const double *qd, const double *p, double *TV);
 

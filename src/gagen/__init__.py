@@ -16,6 +16,7 @@ from .errors import (
     NonFiniteStateError,
     SingularMassMatrixError,
 )
+from .ident import identify
 from .loading import load
 from .sim.batch import BatchResult, simulate_batch
 from .sim.controllers import PD, ComputedTorque, paper_controller
@@ -46,6 +47,7 @@ __all__ = [
     "SingularMassMatrixError",
     "__version__",
     "derive",
+    "identify",
     "inverse_dynamics_along",
     "load",
     "paper_controller",

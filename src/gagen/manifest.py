@@ -34,6 +34,10 @@ def joint_names(joint: JointInfo, suffixes: tuple[str, ...]) -> list[str]:
         return [f"{joint.name}_{suffix}" for suffix in suffixes]
     return [joint.name]
 
+# The runtime parameter that holds the width w of the smooth sign tanh(qd / w) with which
+# simulations integrate Coulomb friction (gagen.model.model adds it to models with friction).
+FRICTION_WIDTH = "coulomb_width"
+
 
 @dataclass(frozen=True)
 class JointInfo:
@@ -60,6 +64,9 @@ class ModelInfo:
     # "link" or "joint")
     bodies: tuple[tuple[int, int, int], ...] = ()
     frames: tuple[tuple[str, int, str], ...] = ()
+    # the moving bodies (fixed ones merged in), in coordinate order: the regressor's
+    # columns are named after them
+    moving_bodies: tuple[str, ...] = ()
 
     @property
     def coordinates(self) -> list[str]:
@@ -94,6 +101,24 @@ class ModelInfo:
     def parameter_defaults(self) -> dict[str, float]:
         return dict(self.parameters)
 
+    def jointed_coordinates(self) -> list[int]:
+        """The velocity coordinate of each 1-dof joint (a floating joint's six skipped): the
+        coordinates of the regressor's damping, friction and armature columns."""
+        out, k = [], 0
+        for joint in self.joints:
+            if joint.type == "floating":
+                k += len(VELOCITY)
+            else:
+                out.append(k)
+                k += 1
+        return out
+
+    @property
+    def regressor_names(self) -> list[str]:
+        """The names of the regressor's columns (`regressor_names`)."""
+        return regressor_names(self.moving_bodies, [j.name for j in self.joints
+                                                    if j.type != "floating"])
+
     def parameter_vector(self) -> np.ndarray:
         """The default parameters in declaration order."""
         return np.array([value for _, value in self.parameters], dtype=float)
@@ -104,7 +129,8 @@ class ModelInfo:
                 "joints": [asdict(joint) for joint in self.joints],
                 "parameters": [list(item) for item in self.parameters],
                 "bodies": [list(item) for item in self.bodies],
-                "frames": [list(item) for item in self.frames]}
+                "frames": [list(item) for item in self.frames],
+                "moving_bodies": list(self.moving_bodies)}
         return json.dumps(data, sort_keys=True, ensure_ascii=False).encode().hex()
 
     @classmethod
@@ -115,7 +141,8 @@ class ModelInfo:
                    parameters=tuple((name, float(value)) for name, value in data["parameters"]),
                    bodies=tuple(tuple(int(x) for x in b) for b in data.get("bodies", ())),
                    frames=tuple((str(name), int(b), str(kind))
-                                for name, b, kind in data.get("frames", ())))
+                                for name, b, kind in data.get("frames", ())),
+                   moving_bodies=tuple(data.get("moving_bodies", ())))
 
     @classmethod
     def from_model(cls, model) -> ModelInfo:
@@ -136,4 +163,21 @@ class ModelInfo:
         return cls(name=model.name, joints=tuple(joints), source=str(model.source or ""),
                    parameters=tuple((name, float(value))
                                     for name, value in model.parameters.items()),
-                   bodies=bodies, frames=frames)
+                   bodies=bodies, frames=frames,
+                   moving_bodies=tuple(body.name for body in model.moving_bodies))
+
+
+# A moving body's inertial parameters in the regressor, Pinocchio's order (its
+# Inertia.toDynamicParameters): mass, first moment m c, and the inertia about the body
+# frame's origin O (not about the mass centre, unlike a URDF's <inertia>).
+BODY_PARAMETERS = ("m", "mcx", "mcy", "mcz", "IOxx", "IOxy", "IOyy", "IOxz", "IOyz", "IOzz")
+# Then, per 1-dof joint (not a floating one), the joint terms (gagen.symbolic.joints).
+JOINT_PARAMETERS = ("damping", "friction", "armature")
+
+
+def regressor_names(bodies, joints) -> list[str]:
+    """The regressor's columns: `<parameter>_<body>` for each moving body's 10 inertial
+    parameters (BODY_PARAMETERS), then `damping_<joint>` for every 1-dof joint,
+    `friction_<joint>` and `armature_<joint>`."""
+    names = [f"{key}_{body}" for body in bodies for key in BODY_PARAMETERS]
+    return names + [f"{key}_{joint}" for key in JOINT_PARAMETERS for joint in joints]

@@ -94,8 +94,12 @@ def _add_numbers(p: argparse.ArgumentParser, flag: str, help: str, example: str)
 # ------------------------------------------------------------------------ arguments
 
 
-def _add_model(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", nargs="?", default="rrr", help=MODEL_HELP)
+def _add_model(p: argparse.ArgumentParser, required: bool = False) -> None:
+    if required:
+        p.add_argument("model", help=MODEL_HELP.replace(" (default: rrr, the paper's robot)",
+                                                        ""))
+    else:
+        p.add_argument("model", nargs="?", default="rrr", help=MODEL_HELP)
     p.add_argument("--strict", action="store_true",
                    help="refuse an inertia slightly off physical (CAD round-off), which "
                    "otherwise loads with a warning")
@@ -135,10 +139,14 @@ def _run_arguments(p: argparse.ArgumentParser, what: str) -> None:
                    help=f"{what} in seconds (default: %(default)s, as in the paper)")
     p.add_argument("--points", type=_sample_count, default=501, metavar="N",
                    help="output samples, evenly spaced (default: %(default)s)")
+    _add_output_and_backend(p, "equations of motion")
+
+
+def _add_output_and_backend(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--out", metavar="DIR",
                    help="output folder (default: out/<model name>, e.g. out/rrr)")
     p.add_argument("--backend", choices=("compiled", "lambdify"), default="compiled",
-                   help="equations of motion as compiled C or through sympy.lambdify "
+                   help=f"{what} as compiled C or through sympy.lambdify "
                    "(default: %(default)s)")
     _add_cache_dir(p)
 
@@ -207,6 +215,22 @@ def _inverse_arguments(p: argparse.ArgumentParser) -> None:
                  "or one per coordinate", "-60 -60 -30")
 
 
+def _identify_arguments(p: argparse.ArgumentParser) -> None:
+    _add_model(p, required=True)
+    p.add_argument("data", help="CSV of measurements: t, the coordinates, their rates "
+                   "<name>_d, optionally <name>_dd, and the torques tau_<name>")
+    _add_output_and_backend(p, "the regressor")
+    p.add_argument("--window", type=_positive, default=None, metavar="S",
+                   help="Savitzky-Golay window in seconds for missing rates and "
+                   "accelerations (default: 0.05)")
+    p.add_argument("--polyorder", type=int, default=4, metavar="K",
+                   help="Savitzky-Golay polynomial degree, at least 2 (default: %(default)s)")
+    p.add_argument("--min-speed", type=_nonnegative, default=0.0, metavar="V",
+                   help="leave out each joint's torque where it moves slower than V (rad/s, "
+                   "m/s): Coulomb friction at rest holds any torque within its bound "
+                   "(default: %(default)s)")
+
+
 def _paper_arguments(p: argparse.ArgumentParser) -> None:
     from .paper import DEFAULT_OUT
 
@@ -264,6 +288,7 @@ def build_command(args: argparse.Namespace) -> int:
 
 def info_command(args: argparse.Namespace) -> int:
     """A model's coordinates, parameters and the API of its dynamics object."""
+    from ..manifest import ModelInfo
     from ..model.resolve import resolve_model
 
     model = resolve_model(args.model, strict=args.strict, floating_base=args.floating_base)
@@ -280,7 +305,7 @@ def info_command(args: argparse.Namespace) -> int:
     print("parameters")
     for name, value in model.parameters.items():
         print(f"  {name:<24} {value:g}")
-    _print_methods(model.dof, model.nq)
+    _print_methods(model.dof, model.nq, len(ModelInfo.from_model(model).regressor_names))
     return 0
 
 
@@ -305,14 +330,20 @@ _METHODS = (
      "(dqdd_dq, dqdd_dqd, dqdd_dtau = M^-1): ({n}, {n}) each"),
     ("coriolis_matrix(q, qd) *", "C with C qd = velocity terms: ({n}, {n})"),
     ("linearize(q, qd, tau) *", "(A, B) of x' = f(x, tau), x = (q, qd): ({m}, {m}), ({m}, {n})"),
+    ("regressor(q, qd, qdd)", "Y with tau = Y pi: ({n}, {P})"),
+    ("regressor_parameters()", "pi: ({P},), names: dyn.regressor_names"),
+    ("base_grouping()", "the base parameters (r = rank Y of them; .text())"),
+    ("base_regressor(q, qd, qdd)", "Y_b with tau = Y_b pi_b: ({n}, r)"),
+    ("base_parameters()", "pi_b: (r,)"),
 )
 
 
-def _print_methods(n: int, nq: int) -> None:
-    """The API of `gagen.load(model)` with this model's array shapes."""
+def _print_methods(n: int, nq: int, P: int) -> None:
+    """The API of `gagen.load(model)` with this model's array shapes (P: the regressor's
+    columns)."""
     print("methods      dyn = gagen.load(MODEL); stacked (N, ...) inputs give stacked outputs")
     for call, returns in _METHODS:
-        print(f"  {call:<44} {returns.format(n=n, m=2 * n, nq=nq)}")
+        print(f"  {call:<44} {returns.format(n=n, m=2 * n, nq=nq, P=P)}")
     print('  * backend="lambdify" for now; the compiled backend gets them in the next step')
 
 
@@ -351,6 +382,24 @@ def sweep_command(args: argparse.Namespace) -> int:
                     scheduler=args.scheduler, out=args.out, cache_dir=args.cache_dir,
                     plot=not args.no_plot)
     print_sweep_report(run)
+    return 0
+
+
+def identify_command(args: argparse.Namespace) -> int:
+    """Identify a model's base parameters from a CSV of measurements (gagen.ident)."""
+    from ..ident import identify, read_measurements
+    from .runs import load_dynamics, output_folder
+
+    model, dyn = load_dynamics(args.model, args.backend, args.cache_dir, args.strict)
+    data = read_measurements(args.data, dyn.coordinates, args.window, args.polyorder)
+    result = identify(dyn, data.q, data.qd, data.qdd, data.tau, min_speed=args.min_speed)
+    folder = output_folder(args.out, model)
+    files = [result.to_csv(folder / "identified.csv"), result.to_json(folder / "identified.json")]
+    print(f"gagen: {len(data.t)} samples of '{model.name}' from {args.data}"
+          + (f"; estimated {data.estimated}" if data.estimated else ""))
+    print(result.summary())
+    for path in files:
+        print(f"gagen: wrote {path}")
     return 0
 
 
@@ -416,6 +465,16 @@ SWEEP_DESCRIPTION = (
     "5-95 % band, median, nominal, deviation from the nominal) and + _final.csv (statistics\n"
     "of the final state, also printed).")
 
+IDENTIFY_DESCRIPTION = (
+    "Identification: least squares on the base regressor, tau = Y_b(q, qd, qdd) pi_b.\n\n"
+    "DATA is a CSV with the columns t, <coordinate>, <coordinate>_d, optionally\n"
+    "<coordinate>_dd, and tau_<coordinate> (SimulationResult.to_csv writes them). Missing\n"
+    "rates and accelerations are estimated by a Savitzky-Golay filter (--window, --polyorder;\n"
+    "evenly spaced samples; q and tau are smoothed by the same window and the half-windows\n"
+    "at both ends dropped). Writes identified.csv (name, value, std, relative std,\n"
+    "expression) and identified.json (also the grouping matrix and covariance) into --out\n"
+    "and prints the estimates.")
+
 COMMANDS: dict[str, Command] = {
     "build": Command(
         build_command, "derive, generate C and compile a model", _build_arguments,
@@ -431,6 +490,9 @@ COMMANDS: dict[str, Command] = {
     "sweep": Command(sweep_command,
                      "many simulations at once under varied parameters: Monte-Carlo, sweeps",
                      _sweep_arguments, SWEEP_DESCRIPTION, preformatted=True),
+    "identify": Command(identify_command,
+                        "identify the base parameters from measured motion and torques",
+                        _identify_arguments, IDENTIFY_DESCRIPTION, preformatted=True),
     "paper": Command(
         paper_command,
         "reproduce the paper: Fig. 2, 3 (direct) and Fig. 4 (inverse dynamics)",

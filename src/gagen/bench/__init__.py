@@ -27,8 +27,11 @@ Default (a few minutes on 2 cores):
                     contacts), and Dask's overhead per chunk on a LocalCluster
   scaling           cold builds of chain:2, chain:4, chain:6 and the UR5: derive, generate,
                     compile times, operations before/after CSE, forward dynamics per call
---full adds chain:3 ... chain:12 and the Panda to the scaling study, and the Panda
-against Pinocchio per call (tens of minutes).
+--full adds chain:3 ... chain:12 and the Panda to the scaling study, the Panda against
+Pinocchio per call, and the regressor section (tens of minutes):
+  regressor         the Panda's regressor per call against Pinocchio's
+                    computeJointTorqueRegressor; identification from 10,000 samples
+                    (gagen.identify against Pinocchio's regressor in a loop + lstsq)
 
 Candidates are timed interleaved (round-robin over the repeats); reported are medians,
 interquartile ranges and ratios to a baseline."""

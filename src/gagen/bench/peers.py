@@ -20,6 +20,7 @@ import sympy as sp
 from ..reference.kane import kane_rrr
 from ..reference.pinocchio import (
     from_pinocchio,
+    joint_forces,
     pinocchio_mass_matrix,
     to_pinocchio,
 )
@@ -38,15 +39,19 @@ def pinocchio_model(model, p: dict[str, float] | None = None):
 
 
 def check_pinocchio(dyn, pm, q, qd, qdd, tau, rtol: float = 1e-9) -> None:
-    """Raise if Pinocchio and gagen disagree at this state (checked before any timing)."""
+    """Raise if Pinocchio and gagen disagree at this state (checked before any timing).
+
+    Pinocchio's rnea and aba leave out the joints' damping and friction (a URDF's
+    <dynamics>; its armature they include): they are added here, as gagen includes them."""
     pin = optional("pinocchio")
     data = pm.createData()
-    pq, pqd, pqdd, ptau = to_pinocchio(pm, q, qd, qdd, tau)
+    forces = joint_forces(pm, qd)
+    pq, pqd, pqdd, ptau = to_pinocchio(pm, q, qd, qdd, np.asarray(tau, float) - forces)
     checks = (
         ("forward dynamics", from_pinocchio(pm, pin.aba(pm, data, pq, pqd, ptau)),
          dyn.forward_dynamics(q, qd, tau)),
         ("mass matrix", pinocchio_mass_matrix(pm, data, pq), dyn.mass_matrix(q)),
-        ("inverse dynamics", from_pinocchio(pm, pin.rnea(pm, data, pq, pqd, pqdd)),
+        ("inverse dynamics", from_pinocchio(pm, pin.rnea(pm, data, pq, pqd, pqdd)) + forces,
          dyn.inverse_dynamics(q, qd, qdd)),
     )
     for quantity, theirs, ours in checks:

@@ -94,6 +94,16 @@ def scaling_table(rows: list[dict]) -> str:
     return markdown_table(rows)
 
 
+def identification_table(rows: list[dict]) -> str:
+    lines = ["| task | implementation | call | median s | q1–q3 s | ratio to gagen |",
+             "|---|---|---|--:|--:|--:|"]
+    for r in rows:
+        lines.append(f"| {r['task']} | {r['implementation']} | `{r['call']}` "
+                     f"| {_num(r['median_s'])} | {_num(r['q1_s'])}–{_num(r['q3_s'])} "
+                     f"| {_ratio(r['ratio'])} |")
+    return "\n".join(lines)
+
+
 HOW = """\
 How: every section times its candidates in one process, interleaved: each repeat times
 every candidate once (a `timeit` loop of about {target} per sample, divided by the loop
@@ -205,6 +215,22 @@ def markdown(results: dict, images: dict | None = None) -> str:
         "the same URDF with a floating joint and no contacts (kinematics, M, bias forces and "
         f"qacc in one call), {fl.get('repeats', '?')} interleaved repeats; ratios to gagen.",
         percall_table, None, images)
+    rg = results.get("regressor", {})
+    lines += _section(
+        results, "regressor", "The regressor and identification on the Panda",
+        f"`dyn.regressor(q, qd, qdd)` (9 x 117: 10 columns per body and damping, friction "
+        f"and armature per joint) against Pinocchio's computeJointTorqueRegressor (9 x 90), "
+        f"checked equal on the body columns, {rg.get('repeats', '?')} interleaved repeats.",
+        percall_table, None, images)
+    if rg.get("identify"):
+        lines += [("Identification from noisy torques along an exciting trajectory: "
+                  "`gagen.identify` (base regressor, normal equations, standard "
+                  "deviations; the base grouping computed once and cached on the dynamics, "
+                  "timed on its own), "
+                  "against Pinocchio's regressor in a Python loop over the samples and "
+                  "`numpy.linalg.lstsq` (minimum-norm, no base parameters), "
+                  f"{rg.get('identify_repeats', '?')} interleaved repeats."), "",
+                  identification_table(rg["identify"]), ""]
     sc = results.get("scaling", {})
     lines += _section(
         results, "scaling", "Scaling: build and call time against the robot's size",

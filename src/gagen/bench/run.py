@@ -22,7 +22,8 @@ import numpy as np
 
 from .common import PANDA, Progress, compiled, find_urdf_dir, machine_info, optional
 
-SECTIONS = ("percall", "batched", "simulation", "throughput", "scaling", "panda", "floating")
+SECTIONS = ("percall", "batched", "simulation", "throughput", "scaling", "panda", "floating",
+            "regressor")
 
 
 @dataclass
@@ -41,6 +42,9 @@ class Settings:
     throughput_runs: int = 256  # paper runs per batch
     throughput_panda_runs: int = 32  # Panda runs per batch (none: the Panda is left out)
     throughput_dask_chunks: int = 16  # 0: Dask is left out
+    regressor_repeats: int = 31
+    identify_repeats: int = 5
+    identify_samples: int = 10_000
     sections: tuple[str, ...] = ("percall", "batched", "simulation", "throughput", "scaling")
     scaling_models: list[str] | None = None  # None: the mode's default list
     extra: dict = field(default_factory=dict)
@@ -53,7 +57,8 @@ class Settings:
             return cls(mode="smoke", target_s=1e-3, percall_repeats=3, batched_repeats=3,
                        batched_sizes=(1, 10, 100), simulation_repeats=2, scaling_repeats=3,
                        panda_repeats=3, scaling_models=["chain:2"], throughput_repeats=2,
-                       throughput_runs=8, throughput_panda_runs=0, throughput_dask_chunks=0)
+                       throughput_runs=8, throughput_panda_runs=0, throughput_dask_chunks=0,
+                       regressor_repeats=3, identify_repeats=1, identify_samples=500)
         return cls()
 
 
@@ -81,7 +86,9 @@ class Bench:
                                      "simulation": settings.simulation_repeats,
                                      "scaling": settings.scaling_repeats,
                                      "panda": settings.panda_repeats,
-                                     "throughput": settings.throughput_repeats}},
+                                     "throughput": settings.throughput_repeats,
+                                     "regressor": settings.regressor_repeats,
+                                     "identify": settings.identify_repeats}},
             "notes": [],
         }
 
@@ -245,28 +252,52 @@ class Bench:
                              progress=lambda text: self.progress("floating", text))
         return {"rows": rows, "repeats": s.panda_repeats}
 
-    def panda(self) -> dict:
+    def _panda(self, section: str):
+        """(dyn, urdf) of the Panda, built once (or by the scaling study); None, note."""
         from ..model.resolve import resolve_model
-        from .percall import panda_rows
 
-        s = self.settings
         folder = find_urdf_dir(self.urdf_dir, needed=PANDA)
         if folder is None:
-            note = f"{PANDA} not found: the Panda per-call section is skipped (--urdf-dir)."
+            note = f"{PANDA} not found: the {section} section is skipped (--urdf-dir)."
             self.results["notes"].append(note)
-            self.progress("panda", note)
-            return {"rows": [], "skipped": note}
+            self.progress(section, note)
+            return None, note
         urdf = folder / PANDA
         dyn = self.loaded.get(str(urdf))  # built by the scaling study if it ran
         if dyn is None:
             dyn, _, times = compiled(resolve_model(urdf), self.scratch / "panda")
-            self.progress("panda", f"Panda built in {times['build_s']:.1f} s")
+            self.loaded[str(urdf)] = dyn
+            self.progress(section, f"Panda built in {times['build_s']:.1f} s")
+        return dyn, urdf
+
+    def panda(self) -> dict:
+        from .percall import panda_rows
+
+        s = self.settings
+        dyn, urdf = self._panda("panda")
+        if dyn is None:
+            return {"rows": [], "skipped": urdf}
         self.progress("panda", "timing")
         rows = panda_rows(dyn, urdf, s.panda_repeats, s.target_s, baseline="gagen")
         if not any(r["implementation"] == "Pinocchio" for r in rows):
             self.results["notes"].append("Pinocchio is not installed: the Panda section "
                                          "times gagen only.")
         return {"rows": rows, "repeats": s.panda_repeats}
+
+    def regressor(self) -> dict:
+        from .regressor import identification_rows, regressor_rows
+
+        s = self.settings
+        dyn, urdf = self._panda("regressor")
+        if dyn is None:
+            return {"rows": [], "skipped": urdf}
+        self.progress("regressor", "timing the regressor per call")
+        rows = regressor_rows(dyn, urdf, s.regressor_repeats, s.target_s)
+        self.progress("regressor", f"timing identification from {s.identify_samples:,} "
+                      "samples")
+        identify = identification_rows(dyn, urdf, s.identify_repeats, s.identify_samples)
+        return {"rows": rows, "identify": identify, "repeats": s.regressor_repeats,
+                "identify_repeats": s.identify_repeats}
 
     # -- the run ---------------------------------------------------------------------
 
@@ -280,7 +311,7 @@ class Bench:
         failed = 0
         titles = {"percall": "per call", "batched": "batched", "simulation": "simulation",
                   "throughput": "throughput", "scaling": "scaling", "panda": "panda",
-                  "floating": "floating"}
+                  "floating": "floating", "regressor": "regressor"}
         try:
             if {"percall", "batched", "simulation", "throughput"} & set(self.settings.sections):
                 start = time.perf_counter()

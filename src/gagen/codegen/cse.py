@@ -28,9 +28,13 @@ class Assignment:
 class CSEResult:
     """All assignments in one dependency order, and the reduced output expressions."""
 
-    def __init__(self, eqs: Equations, eliminate: bool = True):
-        outputs = eqs.outputs()
-        defs = eqs.intermediates
+    def __init__(self, eqs: Equations, eliminate: bool = True, definitions=None,
+                 outputs=None):
+        """CSE of `eqs`'s outputs in its intermediates, or of other `outputs` (name -> list)
+        written in `definitions` (the regressor's program)."""
+        outputs = eqs.outputs() if outputs is None else outputs
+        defs = eqs.intermediates if definitions is None else definitions
+        self.eliminated = eliminate
         flat = [e for v in outputs.values() for e in v]
         self.ops_before = _ops(e for _, e in defs) + _ops(flat)
         start = time.perf_counter()

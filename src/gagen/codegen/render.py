@@ -19,9 +19,11 @@ from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE, precedence
 
 from .. import __version__
-from ..manifest import QUATERNION_RESTORING, ModelInfo
+from ..manifest import FRICTION_WIDTH, QUATERNION_RESTORING, ModelInfo
+from ..symbolic.differentiate import needed_definitions
 from ..symbolic.frames import add_frame_kinematics
 from ..symbolic.gibbs_appell import Equations
+from ..symbolic.regressor import with_regressor
 from .config import INLINE_STAGE_OPS, CodegenConfig  # noqa: F401 (re-exported)
 from .cse import CSEResult, operation_count
 from .ldlt import factor_pattern, ldlt_plan  # noqa: F401 (factor_pattern re-exported)
@@ -33,7 +35,7 @@ COPIED_FILES = ("integrator.c", "integrator.h", "gagen_ode.h", "gagen_second_ord
                 "gagen_math.h")
 # the C files of a model, all compiled into its module
 MODEL_C_FILES = ("mass_matrix.c", "rhs.c", "simulation.c", "inverse_dynamics.c", "frames.c",
-                 "integrator.c")
+                 "regressor.c", "integrator.c")
 _C_KEYWORDS = frozenset({
     "auto", "break", "case", "char", "const", "continue", "default", "do", "double", "else",
     "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register",
@@ -88,8 +90,13 @@ class GagenCPrinter(C99CodePrinter):
     """C99 printer that names symbols by array slot and avoids pow() for small powers.
 
     sin and cos of a coordinate q[k] print as the locals sn<k> and cs<k>, which each
-    function computes first (`trig_prelude`), two coordinates at a time.
+    function computes first (`trig_prelude`), two coordinates at a time. sign(x) prints as
+    gagen_sign(x) (0 at 0), or, while `smooth_sign_width` holds the C text of a width w,
+    as gagen_smooth_sign(x, w) = tanh(x / w) (the simulation's velocity stage), and
+    f*sign(x) then as gagen_coulomb(f, x, w).
     """
+
+    smooth_sign_width: str | None = None
 
     def __init__(self, names: dict[sp.Symbol, str], coordinates: list[sp.Symbol],
                  fast_trig: bool = True):
@@ -151,6 +158,22 @@ class GagenCPrinter(C99CodePrinter):
             k = used[-1]
             lines.append(f"gagen_sincos(q[{k}], &sn{k}, &cs{k});")
         return lines
+
+    def _print_sign(self, expr):
+        arg = self._print(expr.args[0])
+        if self.smooth_sign_width is None:
+            return f"gagen_sign({arg})"
+        return f"gagen_smooth_sign({arg}, {self.smooth_sign_width})"
+
+    def _print_Mul(self, expr, **kwargs):
+        # friction * sign(qd) in the simulation's stage: gagen_coulomb skips the smooth sign
+        # (a tanh near rest) when the friction is 0, as it is for most joints of a URDF
+        signs = [a for a in expr.args if isinstance(a, sp.sign)]
+        if self.smooth_sign_width is None or len(signs) != 1:
+            return super()._print_Mul(expr, **kwargs)
+        coefficient = sp.Mul(*[a for a in expr.args if a is not signs[0]])
+        return (f"gagen_coulomb({self._print(coefficient)}, {self._print(signs[0].args[0])}, "
+                f"{self.smooth_sign_width})")
 
     def _print_Add(self, expr, order=None):
         terms = []
@@ -240,6 +263,8 @@ KERNEL_ARRAYS = {
     "velocity_aba": ("S", "q", "qd", "tau", "p", "qdd"),
     "placements": ("q", "p", "X"),
     "frame_offsets": ("p", "F"),
+    "regressor": ("q", "qd", "qdd", "p", "Y"),
+    "regressor_parameters": ("p", "pi"),
 }
 
 
@@ -247,7 +272,8 @@ KERNEL_ARRAYS = {
 # GAGEN_KERNEL, built for CPUs with and without FMA like the unsplit kernels (gagen_math.h).
 # Measured on a 50-link chain: inverse dynamics 2.04 -> 1.54 us and forward dynamics
 # 4.84 -> 3.79 us per call, for 1.8 times their compile time.
-LOOPED_KERNELS = ("inverse_dynamics", "gravity", "position", "velocity", "velocity_aba", "mass_matrix")
+LOOPED_KERNELS = ("inverse_dynamics", "gravity", "position", "velocity", "velocity_aba",
+                  "mass_matrix", "regressor")
 
 
 class _Kernels:
@@ -346,6 +372,13 @@ class Stages:
     aba: bool
 
 
+def friction_width_index(eqs: Equations) -> int | None:
+    """The slot in p of the smooth sign's width, for a model with Coulomb friction."""
+    if not eqs.model.has_friction:
+        return None
+    return list(eqs.model.parameters).index(FRICTION_WIDTH)
+
+
 def _stages(eqs: Equations, kernels: _Kernels, inline_stage_ops: int) -> Stages:
     out, coords, printer = kernels.cse.outputs, eqs.coords, kernels.printer
     n = eqs.n
@@ -385,9 +418,16 @@ def _stages(eqs: Equations, kernels: _Kernels, inline_stage_ops: int) -> Stages:
     interface = {symbol: f"S[{k}]" for k, symbol in enumerate(split.interface)}
     position = kernels.block("position", fixed_outputs + list(interface), targets
                              + list(interface.values()), assignments=split.position)
-    velocity = kernels.block("velocity_aba" if aba else "velocity", split.velocity_outputs,
-                             moving_targets, assignments=split.velocity,
-                             externals=interface, cache=False)
+    width = friction_width_index(eqs)
+    # the integrators see Coulomb friction through a smooth sign (model.FRICTION_WIDTH);
+    # forward_dynamics calls the same stage with the width set to 0, the exact sign
+    printer.smooth_sign_width = None if width is None else f"p[{width}]"
+    try:
+        velocity = kernels.block("velocity_aba" if aba else "velocity",
+                                 split.velocity_outputs, moving_targets,
+                                 assignments=split.velocity, externals=interface, cache=False)
+    finally:
+        printer.smooth_sign_width = None
     ops = operation_count([a.expr for a in split.position + split.velocity]
                           + fixed_outputs + split.velocity_outputs)
     return Stages(position, velocity, size=size, interface=ni, gravity_at=gravity_at,
@@ -397,12 +437,35 @@ def _stages(eqs: Equations, kernels: _Kernels, inline_stage_ops: int) -> Stages:
                   aba=aba)
 
 
+def _regressor_blocks(eqs: Equations, kernels: _Kernels,
+                      config: CodegenConfig) -> dict[str, CodeBlock]:
+    """The regressor's functions, from a CSE of their own (eliminating as the dynamics'
+    does): what they share with the dynamics is in different C functions anyway, and the
+    dynamics' kernels stay as they are without it. Their segment functions, if any, join
+    `kernels`'."""
+    outputs = eqs.regressor_outputs()
+    program = needed_definitions(eqs.intermediates + eqs.regressor_intermediates,
+                                 [e for values in outputs.values() for e in values])
+    cse = CSEResult(eqs, kernels.cse.eliminated, program, outputs)
+    printer = GagenCPrinter(_symbol_names(eqs, cse), list(eqs.coords.q), config.fast_trig)
+    own = _Kernels(kernels.ident, cse, printer, config)
+    blocks = {name: own.block(name, cse.outputs[name],
+                              [f"{target}[{k}]" for k in range(len(cse.outputs[name]))])
+              for name, target in (("regressor", "Y"), ("regressor_parameters", "pi"))}
+    kernels.segments.extend(own.segments)
+    return blocks
+
+
 def generate(eqs: Equations, module_name: str, key: str,
              config: CodegenConfig | None = None) -> GeneratedCode:
-    """Generate the C sources, header and Cython wrapper of a model (file name -> text)."""
+    """Generate the C sources, header and Cython wrapper of a model (file name -> text).
+
+    The regressor is attached to `eqs` (a copy) if it is not yet (symbolic.regressor),
+    after the frames' kinematics: its program continues theirs."""
     config = config or CodegenConfig()
     if eqs.placements is None:  # equations written without the frames' kinematics
         eqs = add_frame_kinematics(eqs)
+    eqs = with_regressor(eqs)
     model = eqs.model
     ident = c_identifier(model.name)
     cse = CSEResult(eqs, eqs.derivation == "gibbs-appell" if config.cse is None else config.cse)
@@ -423,6 +486,7 @@ def generate(eqs: Equations, module_name: str, key: str,
                                     [f"X[{k}]" for k in range(len(out["placements"]))]),
         "frame_offsets": kernels.block("frame_offsets", out["frame_offsets"],
                                        [f"F[{k}]" for k in range(len(out["frame_offsets"]))]),
+        **_regressor_blocks(eqs, kernels, config),
     }
     stages = _stages(eqs, kernels, config.inline_stage_ops)
     info = ModelInfo.from_model(model)
@@ -433,6 +497,8 @@ def generate(eqs: Equations, module_name: str, key: str,
         "n": n,
         "np": len(eqs.parameters),
         "nq": eqs.nq,
+        "nreg": len(eqs.regressor_parameters),
+        "width_index": friction_width_index(eqs),
         # user names reach the sources only as identifiers (comments of the header)
         "coordinates": [c_identifier(c) for c in model.coordinates],
         "configuration": [c_identifier(c) for c in model.configuration],
@@ -466,6 +532,7 @@ def generate(eqs: Equations, module_name: str, key: str,
         "simulation.c": env.get_template("model/simulation.c.j2").render(context),
         "inverse_dynamics.c": env.get_template("model/inverse_dynamics.c.j2").render(context),
         "frames.c": env.get_template("model/frames.c.j2").render(context),
+        "regressor.c": env.get_template("model/regressor.c.j2").render(context),
         f"{module_name}.pyx": env.get_template("cython/wrapper.pyx.j2").render(context),
     }
     kernels_template = env.get_template("model/kernels.c.j2")

@@ -34,6 +34,30 @@ def merge_fixed_joints(model: Model) -> Model:
     """
     if all(b.joint.moves for b in model.bodies):
         return model
+    hosts, order, frames, placement = _hosts(model)
+    bodies = tuple(_combined(hosts[name]) for name in order)
+    return replace(model, bodies=bodies, extra_frames=tuple(frames) + tuple(
+        replace(f, body=placement[f.body][0],
+                xyz=sp.ImmutableMatrix(placement[f.body][1] + placement[f.body][2] * f.xyz),
+                rotation=sp.ImmutableMatrix(placement[f.body][2] * f.rotation))
+        for f in model.extra_frames))
+
+
+def mass_pieces(model: Model) -> list[tuple[Body, list[tuple[sp.Expr, sp.Matrix, sp.Matrix]]]]:
+    """Per moving body (in coordinate order): the body as `merge_fixed_joints` keeps it
+    (joint origin composed through fixed joints, own mass properties) and the pieces of
+    mass that the merge adds up into it: (mass, mass centre, central inertia) in its frame,
+    its own first. Bodies welded to the world are in no list."""
+    hosts, order, _, _ = _hosts(model)
+    return [(hosts[name].body, [(hosts[name].body.mass, sp.Matrix(hosts[name].body.com),
+                                 sp.Matrix(hosts[name].body.inertia))] + hosts[name].pieces)
+            for name in order]
+
+
+def _hosts(model: Model):
+    """The moving bodies re-attached past fixed joints, each with the fixed bodies' mass
+    pieces it takes in; their names, parents first; the merged bodies' frames; and where
+    each body's frame sits (host, position, rotation)."""
     hosts: dict[str, _Host] = {}
     frames: list[Frame] = []
     # Where each body's frame sits: (host name, position, rotation) in the host's frame.
@@ -59,12 +83,7 @@ def merge_fixed_joints(model: Model) -> Model:
                        Frame(body.joint.name, host, xyz, rot, "joint")]
             if host != WORLD and not _massless(body):
                 hosts[host].pieces.append(_piece_in_host(body, xyz, rot))
-    bodies = tuple(_combined(hosts[name]) for name in order)
-    return replace(model, bodies=bodies, extra_frames=tuple(frames) + tuple(
-        replace(f, body=placement[f.body][0],
-                xyz=sp.ImmutableMatrix(placement[f.body][1] + placement[f.body][2] * f.xyz),
-                rotation=sp.ImmutableMatrix(placement[f.body][2] * f.rotation))
-        for f in model.extra_frames))
+    return hosts, order, frames, placement
 
 
 def _massless(body: Body) -> bool:

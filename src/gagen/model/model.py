@@ -18,6 +18,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import InertiaWarning, ModelError, one_line
+from ..manifest import FRICTION_WIDTH
 
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating")
 # A floating joint (Pinocchio's FreeFlyer) has 7 configuration entries, the position of its
@@ -28,6 +29,12 @@ JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating")
 FLOATING_CONFIGURATION = ("x", "y", "z", "qx", "qy", "qz", "qw")
 FLOATING_VELOCITY = ("vx", "vy", "vz", "wx", "wy", "wz")
 WORLD = "world"
+# The width of the smooth sign tanh(qd / w) that simulations use for Coulomb friction
+# (gagen.sim.simulate, the compiled integrators) is the runtime parameter FRICTION_WIDTH of
+# every model with friction, added with this default (rad/s or m/s) unless the model
+# declares it. 0 means the exact sign.
+FRICTION_WIDTH_DEFAULT = 0.01
+JOINT_TERMS = ("damping", "friction", "armature")
 
 
 def rotation_from_rpy(roll, pitch, yaw) -> sp.ImmutableMatrix:
@@ -123,6 +130,12 @@ class Joint:
     axis: sp.ImmutableMatrix = field(default_factory=lambda: vector([0, 0, 1]))
     limits: Limits | None = None
     mimic: str | None = None  # metadata only: a mimic joint is an independent coordinate
+    # Joint terms (numbers or expressions in the parameters, >= 0 at the defaults):
+    # viscous damping (tau += damping * qd), Coulomb friction (tau += friction * sign(qd))
+    # and armature, the rotor inertia reflected at the joint (M_kk += armature).
+    damping: sp.Expr = ZERO
+    friction: sp.Expr = ZERO
+    armature: sp.Expr = ZERO
 
     @property
     def moves(self) -> bool:
@@ -201,7 +214,8 @@ class Model:
 
     def __post_init__(self):
         object.__setattr__(self, "bodies", tuple(_tree_order(self.bodies, self.source)))
-        object.__setattr__(self, "parameters", dict(self.parameters))
+        object.__setattr__(self, "parameters", _with_friction_width(self.bodies,
+                                                                    self.parameters))
         _validate(self)
 
     @property
@@ -272,6 +286,11 @@ class Model:
         return out
 
     @property
+    def has_friction(self) -> bool:
+        """Whether any joint has Coulomb friction (not structurally zero)."""
+        return any(has_friction(b.joint) for b in self.bodies)
+
+    @property
     def symbols(self) -> dict[str, sp.Symbol]:
         return {name: sp.Symbol(name) for name in self.parameters}
 
@@ -291,7 +310,7 @@ class Model:
                         b.name, b.parent, j.name, j.type,
                         sp.srepr(j.origin_xyz), sp.srepr(j.origin_rotation), sp.srepr(j.axis),
                         sp.srepr(b.mass), sp.srepr(b.com), sp.srepr(b.inertia),
-                    ]
+                    ] + _joint_terms_text(j)
                 )
             )
         lines += ["frame " + "|".join([f.name, f.body, f.kind, sp.srepr(f.xyz),
@@ -300,6 +319,28 @@ class Model:
 
     def content_hash(self) -> str:
         return hashlib.sha256(self.canonical().encode()).hexdigest()
+
+
+def _joint_terms_text(joint: Joint) -> list[str]:
+    """The joint terms for the canonical text; none when all are zero, so the keys of
+    models without joint terms are what they were before joint terms existed."""
+    terms = [sp.sympify(getattr(joint, key)) for key in JOINT_TERMS]
+    if all(t.is_zero is True for t in terms):
+        return []
+    return [f"{key}={sp.srepr(t)}" for key, t in zip(JOINT_TERMS, terms)]
+
+
+def has_friction(joint: Joint) -> bool:
+    """Whether a joint's Coulomb friction is not structurally zero."""
+    return joint.moves and not joint.floating and sp.sympify(joint.friction).is_zero is not True
+
+
+def _with_friction_width(bodies, parameters) -> dict[str, float]:
+    """The parameters, with the smooth-sign width added when a joint has friction."""
+    out = dict(parameters)
+    if FRICTION_WIDTH not in out and any(has_friction(b.joint) for b in bodies):
+        out[FRICTION_WIDTH] = FRICTION_WIDTH_DEFAULT
+    return out
 
 
 def _tree_order(bodies, source: str) -> list[Body]:
@@ -380,8 +421,10 @@ def _validate(model: Model) -> None:
                              f"unknown joint type '{j.type}' (expected one of {', '.join(JOINT_TYPES)})")
         for label, expr in (("origin", j.origin_xyz), ("origin rotation", j.origin_rotation),
                             ("axis", j.axis), ("mass", b.mass), ("com", b.com),
-                            ("inertia", b.inertia)):
+                            ("inertia", b.inertia), ("damping", j.damping),
+                            ("friction", j.friction), ("armature", j.armature)):
             check_symbols(expr, f"{where}, {label}")
+        _check_joint_terms(j, values, src, f"{where}, joint '{j.name}'")
         if j.floating and b.parent != WORLD:
             raise ModelError(src, f"{where}, joint '{j.name}'", "a floating joint must attach "
                              f"its body to '{WORLD}' (its parent is '{b.parent}')")
@@ -407,6 +450,27 @@ def _validate(model: Model) -> None:
     # welded to it), which is what enters the equations.
     for unit in rigid_units(model, values):
         check_inertia(unit.inertia, src, unit.element(*_NAMING.get()), borderline="accept")
+    if model.has_friction and float(params[FRICTION_WIDTH]) < 0:
+        raise ModelError(src, f"parameter '{FRICTION_WIDTH}'",
+                         "the width of the smoothed Coulomb friction must be >= 0")
+
+
+def _check_joint_terms(joint: Joint, values: dict, source: str, element: str) -> None:
+    """Damping, friction and armature: finite and non-negative at the defaults; only a
+    1-dof joint has them (a fixed joint has no coordinate to act on, a floating one is no
+    drive)."""
+    for key in JOINT_TERMS:
+        expr = sp.sympify(getattr(joint, key))
+        if expr.is_zero is True:
+            continue
+        if not joint.moves or joint.floating:
+            raise ModelError(source, f"{element}, {key}",
+                             f"a {joint.type} joint cannot have damping, friction or "
+                             "armature (only revolute, continuous and prismatic joints)")
+        value = _numeric(expr, values, source, f"{element}, {key}")
+        if value < 0:
+            raise ModelError(source, f"{element}, {key}",
+                             f"{key} must be non-negative, got {value:g}")
 
 
 def _inertia_value(body: Body, values: dict[sp.Symbol, float], source: str) -> np.ndarray:

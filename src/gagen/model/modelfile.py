@@ -14,6 +14,7 @@ from . import inputs
 from .expressions import MAX_MAGNITUDE, ExpressionError, ExpressionParser
 from .inputs import check_body_count, describe, name_field, quote, read_description
 from .model import (
+    JOINT_TERMS,
     JOINT_TYPES,
     WORLD,
     Body,
@@ -190,7 +191,8 @@ def _body_from_dict(raw: Any, k: int, coordinate_index: int, parse: _ExprParser,
     rj = raw.get("joint") or {}
     if not isinstance(rj, dict):
         raise ModelError(source, f"{where}, joint", "expected a mapping")
-    _check_keys(rj, {"name", "type", "origin", "axis", "limits"}, source, f"{where}, joint")
+    _check_keys(rj, {"name", "type", "origin", "axis", "limits", *JOINT_TERMS}, source,
+                f"{where}, joint")
     jtype = rj.get("type", "revolute")
     if not isinstance(jtype, str) or jtype not in JOINT_TYPES:
         raise ModelError(source, f"{where}, joint", f"unknown joint type {describe(jtype)} "
@@ -205,9 +207,10 @@ def _body_from_dict(raw: Any, k: int, coordinate_index: int, parse: _ExprParser,
     xyz = parse.vec(origin.get("xyz", [0, 0, 0]), f"{where}, joint origin xyz")
     rpy = parse.vec(origin.get("rpy", [0, 0, 0]), f"{where}, joint origin rpy")
     axis = parse.vec(rj.get("axis", [0, 0, 1]), f"{where}, joint axis")
+    terms = {key: parse(rj.get(key, 0), f"{where}, joint {key}") for key in JOINT_TERMS}
     joint = Joint(name=jname, type=jtype, origin_xyz=vector(xyz),
                   origin_rotation=rotation_from_rpy(*rpy), axis=vector(axis),
-                  limits=_limits(rj.get("limits"), source, f"{where}, joint limits"))
+                  limits=_limits(rj.get("limits"), source, f"{where}, joint limits"), **terms)
     mass = parse(raw.get("mass", 0), f"{where}, mass")
     com = parse.vec(raw.get("com", [0, 0, 0]), f"{where}, com")
     inertia = raw.get("inertia", [0, 0, 0, 0, 0, 0])

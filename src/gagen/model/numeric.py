@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
-from .model import Model
+from .model import JOINT_TERMS, Model
 
 
 @dataclass(frozen=True)
@@ -36,6 +36,9 @@ class NumericBody:
     coordinate: int | None  # first velocity coordinate, None for a fixed joint
     configuration: int | None = None  # first entry of q (a floating joint has 7)
     joint_name: str = ""
+    damping: float = 0.0  # the joint terms (gagen.symbolic.joints)
+    friction: float = 0.0
+    armature: float = 0.0
 
     @property
     def rotates(self) -> bool:
@@ -112,9 +115,14 @@ def numeric_model(model: Model, p=None) -> NumericModel:
             mass=float(sp.sympify(b.mass).xreplace(subs).evalf(30)),
             com=_floats(b.com, subs).reshape(3), inertia=_floats(b.inertia, subs).reshape(3, 3),
             coordinate=starts[b.name][1] if j.moves else None,
-            configuration=starts[b.name][0] if j.moves else None, joint_name=j.name))
+            configuration=starts[b.name][0] if j.moves else None, joint_name=j.name,
+            **{key: _float(getattr(j, key), subs) for key in JOINT_TERMS}))
     return NumericModel(tuple(bodies), _floats(model.gravity, subs).reshape(3),
                         tuple(model.coordinates), model.nq)
+
+
+def _float(expr, subs) -> float:
+    return float(sp.sympify(expr).xreplace(subs).evalf(30))
 
 
 def _floats(matrix, subs) -> np.ndarray:

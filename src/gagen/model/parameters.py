@@ -3,6 +3,8 @@
 Each massive body's mass, mass centre and central inertia become the parameters
 `m_<body>`, `cx_<body>`, `cy_<body>`, `cz_<body>`, `Ixx_<body>`, ... `Iyz_<body>` with the
 file's values as defaults, so a payload can be changed without regenerating the equations.
+Each moving joint's damping, friction and armature become `damping_<joint>`,
+`friction_<joint>` and `armature_<joint>` (`parameterize_joint_terms`).
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ from dataclasses import replace
 
 import sympy as sp
 
-from .model import Body, Model, vector
+from .model import JOINT_TERMS, Body, Joint, Model, vector
 
 # Parameter prefix -> (row, column) of the inertia tensor, in the order they are declared.
 INERTIA_PARAMS = (("Ixx", 0, 0), ("Iyy", 1, 1), ("Izz", 2, 2),
@@ -33,6 +35,27 @@ def parameterize_mass_properties(model: Model) -> Model:
         parameters.update(_body_parameters(body))
         bodies.append(_symbolic_body(body))
     return replace(model, bodies=tuple(bodies), parameters=parameters)
+
+
+def parameterize_joint_terms(model: Model) -> Model:
+    """Turn each 1-dof joint's damping, friction and armature (0 where the description
+    has none) into the parameters `<term>_<joint>`, with its values as defaults: all three
+    for every joint, so that they can be set without a rebuild and every regressor column
+    (gagen.symbolic.regressor) can be fed back from identification."""
+    parameters = dict(model.parameters)
+    bodies = []
+    for body in model.bodies:
+        if body.joint.moves and not body.joint.floating:
+            parameters.update({f"{key}_{body.joint.name}": float(getattr(body.joint, key))
+                               for key in JOINT_TERMS})
+            body = replace(body, joint=_symbolic_joint(body.joint))
+        bodies.append(body)
+    return Model(name=model.name, bodies=tuple(bodies), parameters=parameters,
+                 gravity=model.gravity, source=model.source, description=model.description)
+
+
+def _symbolic_joint(joint: Joint) -> Joint:
+    return replace(joint, **{key: sp.Symbol(f"{key}_{joint.name}") for key in JOINT_TERMS})
 
 
 def _symbolic_body(body: Body) -> Body:

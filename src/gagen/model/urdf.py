@@ -1,10 +1,17 @@
 """Read a URDF robot description into a validated Model (DESIGN.md section 4).
 
 Only what the equations of motion need is read: links' <inertial> and joints' origin, axis,
-limits and mimic. Visuals, collisions, transmissions and gazebo tags are ignored. The root
-link becomes the world, fixed joints are merged away, and every remaining body's mass
-properties become named parameters (defaults from the file) so a payload can be changed
-without regenerating the equations.
+limits, mimic and <dynamics>. Visuals, collisions, transmissions and gazebo tags are
+ignored. The root link becomes the world, fixed joints are merged away, and every remaining
+body's mass properties become named parameters (defaults from the file) so a payload can be
+changed without regenerating the equations.
+
+Every moving joint gets three parameters too: `damping_<joint>` and `friction_<joint>`
+from its <dynamics damping friction> (0 where absent), and `armature_<joint>`, the rotor
+inertia reflected at the joint, default 0. URDF has no armature, but real drives have one,
+identification estimates it (it is a column of the regressor, gagen.ident) and a simulation
+of the identified robot needs it: as a parameter it can be set without a rebuild, at the
+cost of one addition per diagonal entry of M.
 """
 
 from __future__ import annotations
@@ -36,7 +43,7 @@ from .model import (
     rotation_from_rpy,
     vector,
 )
-from .parameters import parameterize_mass_properties
+from .parameters import parameterize_joint_terms, parameterize_mass_properties
 
 GRAVITY = 9.81
 _LINK_INERTIA = ("link", "inertial inertia")  # how messages name a link's inertia
@@ -102,7 +109,7 @@ def parse_urdf_text(text: str | bytes, source: str = "<urdf>", strict: bool = Fa
                       # a root link welded to the world is a frame of it
                       extra_frames=() if floating_base else (Frame(root, WORLD),))
     check_model_inertias(model, strict, *_LINK_INERTIA)
-    return parameterize_mass_properties(merge_fixed_joints(model))
+    return parameterize_joint_terms(parameterize_mass_properties(merge_fixed_joints(model)))
 
 
 def _root_body(link: _Link) -> Body:
@@ -249,8 +256,28 @@ def _parse_joint(elem: ET.Element, k: int, links: dict[str, _Link], source: str)
     xyz, rpy = _origin(elem, source, where)
     joint = Joint(name=name, type=jtype, origin_xyz=vector(xyz),
                   origin_rotation=rotation_from_rpy(*rpy), axis=_axis(elem, jtype, source, where),
-                  limits=_limits(elem, source, where), mimic=_mimic(elem, source, where))
+                  limits=_limits(elem, source, where), mimic=_mimic(elem, source, where),
+                  **_dynamics(elem, jtype, source, where))
     return _UrdfJoint(parent, child, joint)
+
+
+def _dynamics(elem: ET.Element, jtype: str, source: str, where: str) -> dict[str, sp.Expr]:
+    """damping and friction of an optional <dynamics> (0 where absent; ignored on a fixed
+    joint, which has no coordinate for them to act on)."""
+    dynamics = elem.find("dynamics")
+    if dynamics is None or jtype == "fixed":
+        return {}
+    values = {}
+    for key in ("damping", "friction"):
+        text = dynamics.get(key)
+        if text is None:
+            continue
+        value = _number(text, source, f"{where}, dynamics {key}")
+        if value < 0:
+            raise ModelError(source, f"{where}, dynamics {key}",
+                             f"{key} must be non-negative, got {float(value):g}")
+        values[key] = value
+    return values
 
 
 def _link_ref(elem: ET.Element, tag: str, links: dict[str, _Link], source: str,

@@ -32,6 +32,7 @@ def pinocchio_model(model, p=None, aligned: bool = False) -> Any:
     placement: dict[int, Any] = {}  # and its frame's placement in that joint
     order: list[int] = []
     config_order: list[int] = []
+    terms: list[tuple[float, float, float]] = []  # (armature, damping, friction) per velocity
     for i in nm.depth_first():
         b = nm.bodies[i]
         parent_joint = 0 if b.parent < 0 else joint_of[b.parent]
@@ -49,6 +50,7 @@ def pinocchio_model(model, p=None, aligned: bool = False) -> Any:
             size = 6 if b.joint_type == "floating" else 1
             order.extend(range(b.coordinate, b.coordinate + size))
             config_order.extend(range(b.configuration, b.configuration + size + (size == 6)))
+            terms.extend([(b.armature, b.damping, b.friction)] * size)  # 0 for floating
         pm.appendBodyToJoint(joint_id, pin.Inertia(b.mass, b.com, b.inertia), body_place)
         pm.addFrame(pin.Frame(b.name, joint_id, body_place, pin.BODY))  # the link's frame
         joint_of[i], placement[i] = joint_id, body_place
@@ -58,6 +60,11 @@ def pinocchio_model(model, p=None, aligned: bool = False) -> Any:
                            f"{nm.nq or nm.dof}, {nm.dof}")
     pm.gagen_order = np.array(order, dtype=int)
     pm.gagen_configuration_order = np.array(config_order, dtype=int)
+    if terms:
+        # Pinocchio (3 and later) adds the armature in crba, rnea and aba; it keeps damping
+        # and friction only as data: `joint_forces` applies them
+        pm.armature, pm.damping, pm.friction = (np.array(column, dtype=float)
+                                                for column in zip(*terms))
     return pm
 
 
@@ -69,6 +76,12 @@ def _joint_model(pin, axis, rotates: bool, aligned: bool):
                 return getattr(pin, f"JointModel{'R' if rotates else 'P'}{name}")()
     return (pin.JointModelRevoluteUnaligned(unit) if rotates
             else pin.JointModelPrismaticUnaligned(unit))
+
+
+def joint_forces(pm, qd) -> np.ndarray:
+    """damping qd + friction sign(qd) of Pinocchio model `pm`'s joints, in gagen's order."""
+    qd_pin = np.asarray(qd, dtype=float)[pm.gagen_order]
+    return from_pinocchio(pm, pm.damping * qd_pin + pm.friction * np.sign(qd_pin))
 
 
 def to_pinocchio(pm, *vectors) -> list[np.ndarray]:

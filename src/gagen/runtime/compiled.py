@@ -8,7 +8,7 @@ from .dynamics import Dynamics
 from .frames import frame_index
 
 KERNEL_METHODS = ("mass_matrix", "forcing", "forward_dynamics", "inverse_dynamics",
-                  "gravity", "energy")
+                  "gravity", "energy", "regressor", "regressor_parameters")
 
 
 class CompiledDynamics(Dynamics):

@@ -29,6 +29,9 @@ class LambdifyDynamics(Dynamics):
     backend = "lambdify"
 
     def __init__(self, eqs: Equations):
+        from ..symbolic.regressor import with_regressor
+
+        eqs = with_regressor(eqs)
         self.__dict__["_model"] = eqs.model
         self.info = ModelInfo.from_model(eqs.model)
         self.equations = eqs
@@ -43,6 +46,10 @@ class LambdifyDynamics(Dynamics):
         if "placements" in outs:
             self._placement_function = self._lambdify([c.q, p], outs["placements"])
             self._offset_function = self._lambdify([p], outs["frame_offsets"])
+        regressor = eqs.regressor_outputs()
+        program = eqs.intermediates + eqs.regressor_intermediates
+        self._regressor = self._lambdify([c.q, c.qd, c.qdd, p], regressor["regressor"], program)
+        self._pi = self._lambdify([p], regressor["regressor_parameters"], program)
         n = self.n
         self._lower = np.tril_indices(n)
 
@@ -154,6 +161,15 @@ class LambdifyDynamics(Dynamics):
         M_inv = _cholesky_solve(L, np.broadcast_to(np.eye(self.n), L.shape))
         M_inv = 0.5 * (M_inv + np.swapaxes(M_inv, -1, -2))  # symmetric, as M^-1 is
         return -_cholesky_solve(L, dtau_dq), -_cholesky_solve(L, dtau_dqd), M_inv
+
+
+    def regressor(self, q, qd, qdd, p=None) -> np.ndarray:
+        states, stacked = as_states(self.n, q, qd, qdd, names=("q", "qd", "qdd"))
+        flat = self._call(self._regressor, states, p, stacked)
+        return flat.reshape(flat.shape[:-1] + (self.n, -1))
+
+    def regressor_parameters(self, p=None) -> np.ndarray:
+        return np.array(self._pi(*self.parameter_vector(p)), dtype=float)
 
 
 def _cholesky(M: np.ndarray) -> np.ndarray:

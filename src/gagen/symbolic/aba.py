@@ -60,6 +60,7 @@ from ..model.model import Model
 from .differentiate import needed_definitions as _needed
 from .differentiate import recorder_after
 from .gibbs_appell import Equations
+from .joints import armatures, dissipative_forces
 from .kinematics import CoordinateSymbols, Recorder
 from .recursive import Link, _links, _skew, _symmetric, free_velocities
 
@@ -188,7 +189,7 @@ def _program(model: Model, coords: CoordinateSymbols, rec: Recorder) -> AbaProgr
     given = len(rec.definitions)
     links = _links(model, coords, rec)
     c, bias = _velocity_pass(links, coords, rec)
-    U, D, Dinv, u = _articulated_pass(links, coords, rec, c, bias)
+    U, D, Dinv, u = _articulated_pass(links, coords, rec, c, bias, model)
     qdd = _acceleration_pass(links, coords, rec, c, U, Dinv, u, -sp.Matrix(model.gravity))
     pivots = [p for i, link in enumerate(links) if link.k is not None
               for p in (D[i] if link.free else [D[i]])]
@@ -250,8 +251,15 @@ def _velocity_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder):
 
 
 def _articulated_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder,
-                      c: list, bias: list):
-    """Articulated inertias and bias forces, leaves to root; per joint U, D, 1/D and u."""
+                      c: list, bias: list, model: Model):
+    """Articulated inertias and bias forces, leaves to root; per joint U, D, 1/D and u.
+
+    The joint terms (symbolic.joints) enter here: the armature adds to D (a rotor inertia
+    that only joint k's acceleration drives), damping and friction are subtracted from the
+    joint force, u = tau - damping qd - friction sign(qd) - s^T p^A."""
+    armature = armatures(model)
+    # named once: u and the exact-axis step both read it (and sign(qd) is a call in C)
+    force = [rec.name(t - f) for t, f in zip(coords.tau, dissipative_forces(model, coords))]
     IA = [_rigid_inertia(link) for link in links]
     pA = [list(b) for b in bias]
     U: list = [None] * len(links)
@@ -270,17 +278,20 @@ def _articulated_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorde
         if link.k is not None:
             U_n, U_f = IA[i].times(*_joint_motion(link, 1))
             U_n, U_f = rec.vec(U_n), rec.vec(U_f)
-            D[i] = rec.name(_project(link, U_n, U_f))
+            D[i] = rec.name(_project(link, U_n, U_f) + armature[link.k])
             Dinv[i] = rec.name(1 / D[i])
-            u[i] = rec.name(coords.tau[link.k] - _project(link, n_i, f_i))
+            u[i] = rec.name(force[link.k] - _project(link, n_i, f_i))
             U[i] = (U_n, U_f)
             if link.parent is None:
                 continue
             W_n, W_f = rec.vec(U_n * Dinv[i]), rec.vec(U_f * Dinv[i])  # U / D
-            _exact_gain(link, W_n, W_f)
+            exact = armature[link.k].is_zero is True  # else s^T U != D: no exact shortcuts
+            if exact:
+                _exact_gain(link, W_n, W_f)
             Ia = Inertia(IA[i].A - W_n * U_n.T, IA[i].B - W_n * U_f.T, IA[i].C - W_f * U_f.T)
             n_a, f_a = n_i + W_n * u[i], f_i + W_f * u[i]
-            _exact_articulated(link, coords.tau[link.k], Ia, n_a, f_a)
+            if exact:
+                _exact_articulated(link, force[link.k], Ia, n_a, f_a)
             Ia = Ia.named(rec)
             In, If = Ia.times(*c[i])
             n_i, f_i = rec.vec(n_a + In), rec.vec(f_a + If)
@@ -317,8 +328,9 @@ def _exact_articulated(link: Link, tau, Ia: Inertia, n_a: Vec, f_a: Vec) -> None
     """For an axis sign * e_j, the exact zeros and torque of I^a and p^a (in place).
 
     I^a s = I^A s - U (s^T U) / D = 0, so I^a's row and column along the axis vanish; and
-    s^T p^a = s^T p^A + u = tau makes p^a's component j sign * tau. Left to SymPy these
-    would be x - W_j x computed at run time."""
+    s^T p^a = s^T p^A + u = tau makes p^a's component j sign * tau (tau: the joint force
+    less damping and friction). Left to SymPy these would be x - W_j x computed at run
+    time. Both need D = s^T U, i.e. no armature."""
     found = _coordinate_axis(link)
     if found is None:
         return

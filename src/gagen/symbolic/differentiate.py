@@ -100,7 +100,7 @@ def _partials(expr: sp.Expr, symbols: set[sp.Symbol]) -> dict[sp.Symbol, sp.Expr
     symbols (a Gibbs-Appell torque) costs the sum of its terms' sizes, not a hundred times
     its size."""
     if not expr.is_Add:
-        return {s: sp.diff(expr, s) for s in symbols}
+        return {s: _derivative(expr, s) for s in symbols}
     parts: dict[sp.Symbol, list[sp.Expr]] = {s: [] for s in symbols}
     for term in expr.args:
         held = symbols & term.free_symbols
@@ -108,6 +108,17 @@ def _partials(expr: sp.Expr, symbols: set[sp.Symbol]) -> dict[sp.Symbol, sp.Expr
             for s, d in _partials(term, held).items():
                 parts[s].append(d)
     return {s: sp.Add(*ds) for s, ds in parts.items()}
+
+
+def _derivative(expr: sp.Expr, s: sp.Symbol) -> sp.Expr:
+    """d expr / d s, with d sign(x)/dx = 0: Coulomb friction's sign(qd) (symbolic.joints) is
+    constant wherever it has a derivative, and its jump at 0 has none (SymPy would leave an
+    unevaluated Derivative or write 2 DiracDelta(x), which no backend can evaluate)."""
+    signs = {f: sp.Dummy() for f in expr.atoms(sp.sign)}
+    if not signs:
+        return sp.diff(expr, s)
+    held = sp.diff(expr.xreplace(signs), s)  # each sign(...) held constant
+    return held.xreplace({dummy: f for f, dummy in signs.items()})
 
 
 def _symbol_order(symbol: sp.Symbol) -> tuple[str, str]:

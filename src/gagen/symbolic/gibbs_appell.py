@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import sympy as sp
 
 from ..model.model import Model
+from .joints import add_joint_terms
 from .kinematics import (
     BodyKinematics,
     CoordinateSymbols,
@@ -41,11 +42,12 @@ class Equations:
     parameters: list[sp.Symbol]
     intermediates: list[tuple[sp.Symbol, sp.Expr]]
     gibbs: list[sp.Expr]                  # S_i per moving-or-fixed body (eq. 5)
-    mass_matrix: sp.Matrix                # M(q), symmetric
-    velocity_terms: sp.Matrix             # b(q, qd) = dS/dqdd at qdd = 0
+    mass_matrix: sp.Matrix                # M(q), symmetric, with the joints' armatures
+    velocity_terms: sp.Matrix             # b(q, qd) = dS/dqdd at qdd = 0 (rigid bodies)
     gravity_forces: sp.Matrix             # generalized active forces of gravity
-    forcing: sp.Matrix                    # tau + gravity_forces - b: M qdd = forcing
-    inverse_dynamics: sp.Matrix           # tau = dS/dqdd - gravity_forces
+    forcing: sp.Matrix                    # tau + gravity_forces - b - joint damping and
+                                          # friction (symbolic.joints): M qdd = forcing
+    inverse_dynamics: sp.Matrix           # tau = dS/dqdd - gravity_forces + joint terms
     kinetic_energy: sp.Expr
     potential_energy: sp.Expr
     kinematics: list[BodyKinematics] = field(repr=False, default_factory=list)
@@ -59,6 +61,14 @@ class Equations:
     # where the bodies are in the world and the frames on their bodies (symbolic/frames.py)
     placements: list[sp.Expr] | None = None
     frame_offsets: list[sp.Expr] | None = None
+    # Y(q, qd, qdd) with inverse_dynamics = Y pi, and pi in the parameters
+    # (symbolic.regressor.attach_regressor; None until attached). Y is written in
+    # `intermediates` followed by `regressor_intermediates`: a program of its own, so that
+    # the dynamics' outputs and their CSE do not change with it.
+    regressor: sp.Matrix | None = field(repr=False, default=None)
+    regressor_parameters: list[sp.Expr] | None = field(repr=False, default=None)
+    regressor_intermediates: list[tuple[sp.Symbol, sp.Expr]] = field(repr=False,
+                                                                     default_factory=list)
 
     @property
     def n(self) -> int:
@@ -98,6 +108,14 @@ class Equations:
             outputs["placements"] = list(self.placements)
             outputs["frame_offsets"] = list(self.frame_offsets)
         return outputs
+
+    def regressor_outputs(self) -> dict[str, list[sp.Expr]]:
+        """Y row by row and pi (the regressor must be attached); written in
+        `intermediates + regressor_intermediates`."""
+        if self.regressor is None:
+            raise ValueError("no regressor attached (symbolic.regressor.attach_regressor)")
+        return {"regressor": list(self.regressor),  # row-major
+                "regressor_parameters": list(self.regressor_parameters)}
 
 
 def derive(model: Model) -> Equations:
@@ -143,6 +161,7 @@ def derive(model: Model) -> Equations:
         potential_energy=potential_energy(kinematics),
         kinematics=kinematics,
     )
+    add_joint_terms(eqs)
     eqs.seconds = time.perf_counter() - start
     return eqs
 

@@ -35,6 +35,7 @@ import sympy as sp
 
 from ..model.model import Body, Model
 from .gibbs_appell import Equations
+from .joints import add_joint_terms
 from .kinematics import CoordinateSymbols, Recorder, joint_transform, unit_axis
 
 Vec = sp.Matrix
@@ -96,6 +97,7 @@ def derive_recursive(model: Model) -> Equations:
         potential_energy=V,
         derivation="recursive",
     )
+    add_joint_terms(eqs)
     eqs.seconds = time.perf_counter() - start
     return eqs
 
