@@ -217,3 +217,43 @@ def test_c_header_declares_the_regressor():
     assert "void rrr_regressor(const double *q, const double *qd, const double *qdd," in header
     assert "void rrr_regressor_parameters(const double *p, double *pi);" in header
     assert "#define RRR_NREG 39" in header
+
+
+def test_floating_base_regressor_is_pinocchios():
+    """A floating base (Pinocchio's FreeFlyer, the same q and qd layout): 10 more columns
+    for the base body, no joint terms for its six coordinates; Y pi = tau and the body
+    columns equal Pinocchio's."""
+    pin = pytest.importorskip("pinocchio")
+    dyn = gagen.load(URDF_DIR / "panda.urdf", backend="lambdify", floating_base=True)
+    assert (dyn.n, dyn.nq, len(dyn.regressor_names)) == (15, 16, 10 * 10 + 3 * 9)
+    pm = pin.buildModelFromUrdf(str(URDF_DIR / "panda.urdf"), pin.JointModelFreeFlyer())
+    data = pm.createData()
+    rng = np.random.default_rng(12)
+    for _ in range(3):
+        q = pin.randomConfiguration(pm, -np.ones(pm.nq), np.ones(pm.nq))
+        qd, qdd = rng.normal(size=(2, dyn.n))
+        Y = dyn.regressor(q, qd, qdd)
+        np.testing.assert_allclose(Y @ dyn.regressor_parameters(), dyn.inverse_dynamics(q, qd, qdd),
+                                   rtol=1e-11, atol=1e-11)
+        theirs = np.array(pin.computeJointTorqueRegressor(pm, data, q, qd, qdd))
+        np.testing.assert_allclose(Y[:, :100], theirs, rtol=1e-10, atol=1e-10)
+        assert not Y[:6, 100:].any()  # the base's rows have no joint terms
+    damping, _, _ = dyn.joint_terms()
+    assert not damping[:6].any() and damping[6] == 0.003
+
+
+def test_compiled_floating_tree_regressor(cache_dir):
+    """The compiled regressor of a floating tree (q: nq entries, qd: nv) as the lambdify
+    one, and Y pi = tau (the tree test_floating builds too: one build for both)."""
+    from test_floating import floating_tree, random_state
+
+    model = floating_tree(1)
+    compiled = gagen.load(model, cache_dir=cache_dir)
+    lam = gagen.load(model, backend="lambdify")
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        q, qd, qdd = random_state(compiled, rng)
+        Y = compiled.regressor(q, qd, qdd)
+        np.testing.assert_allclose(Y, lam.regressor(q, qd, qdd), rtol=1e-11, atol=1e-11)
+        np.testing.assert_allclose(Y @ compiled.regressor_parameters(),
+                                   compiled.inverse_dynamics(q, qd, qdd), rtol=1e-11, atol=1e-11)

@@ -8,8 +8,9 @@ determine only r = rank Y combinations, the base parameters:
     tau = Y pi = Y_b pi_b,   Y_b = Y[:, independent],   pi_b = K pi   (K: r x P).
 
 Computed numerically, as Gautier ("Numerical calculation of the base inertial parameters
-of robots", 1991): the regressor at `STATES` random states (q uniform in [-pi, pi], qd and
-qdd standard normal; a fixed seed, so the result is reproducible), stacked into W, each
+of robots", 1991): the regressor at `STATES` random states (q uniform in [-pi, pi], a
+floating joint's quaternion uniform on the sphere, qd and qdd standard normal; a fixed
+seed, so the result is reproducible), stacked into W, each
 column scaled to unit norm. Then
 
 - rank: QR with column pivoting (scipy.linalg.qr); r = the number of |R_jj| above
@@ -98,18 +99,22 @@ def _snapped(coefficients: np.ndarray) -> np.ndarray:
     return np.where(close, nearest, coefficients)
 
 
-def random_states(n: int, count: int, seed: int = SEED) -> tuple[np.ndarray, ...]:
-    """(q, qd, qdd), each (count, n): q uniform in [-pi, pi], rates standard normal."""
+def random_states(info, count: int, seed: int = SEED) -> tuple[np.ndarray, ...]:
+    """(q, qd, qdd) of a model (its `ModelInfo`): q (count, nq) uniform in [-pi, pi] with a
+    random unit quaternion for each floating joint, rates (count, nv) standard normal."""
     rng = np.random.default_rng(seed)
-    return (rng.uniform(-np.pi, np.pi, (count, n)), rng.normal(size=(count, n)),
-            rng.normal(size=(count, n)))
+    q = rng.uniform(-np.pi, np.pi, (count, info.nq))
+    for iq, _ in info.floating_joints():
+        quaternion = rng.normal(size=(count, 4))
+        q[:, iq + 3:iq + 7] = quaternion / np.linalg.norm(quaternion, axis=1, keepdims=True)
+    return q, rng.normal(size=(count, info.dof)), rng.normal(size=(count, info.dof))
 
 
 def base_parameters(dyn, p=None) -> BaseParameters:
     """The base parameters of `dyn`'s regressor at the kinematic parameters of `p`."""
     n, names = dyn.n, dyn.regressor_names
     count = max(STATES, -(-4 * len(names) // n))
-    W = dyn.regressor(*random_states(n, count), p).reshape(-1, len(names))
+    W = dyn.regressor(*random_states(dyn.info, count), p).reshape(-1, len(names))
     return group_columns(W, names)
 
 

@@ -164,7 +164,7 @@ class LambdifyDynamics(Dynamics):
 
 
     def regressor(self, q, qd, qdd, p=None) -> np.ndarray:
-        states, stacked = as_states(self.n, q, qd, qdd, names=("q", "qd", "qdd"))
+        states, stacked = as_states(self._sizes, q, qd, qdd, names=("q", "qd", "qdd"))
         flat = self._call(self._regressor, states, p, stacked)
         return flat.reshape(flat.shape[:-1] + (self.n, -1))
 
