@@ -332,6 +332,7 @@ _METHODS = (
     ("linearize(q, qd, tau) *", "(A, B) of x' = f(x, tau), x = (q, qd): ({m}, {m}), ({m}, {n})"),
     ("regressor(q, qd, qdd)", "Y with tau = Y pi: ({n}, {P})"),
     ("regressor_parameters()", "pi: ({P},), names: dyn.regressor_names"),
+    ("joint_terms()", "(damping, friction, armature): ({n},) each"),
     ("base_grouping()", "the base parameters (r = rank Y of them; .text())"),
     ("base_regressor(q, qd, qdd)", "Y_b with tau = Y_b pi_b: ({n}, r)"),
     ("base_parameters()", "pi_b: (r,)"),

@@ -50,8 +50,7 @@ def parameterize_joint_terms(model: Model) -> Model:
                                for key in JOINT_TERMS})
             body = replace(body, joint=_symbolic_joint(body.joint))
         bodies.append(body)
-    return Model(name=model.name, bodies=tuple(bodies), parameters=parameters,
-                 gravity=model.gravity, source=model.source, description=model.description)
+    return replace(model, bodies=tuple(bodies), parameters=parameters)
 
 
 def _symbolic_joint(joint: Joint) -> Joint:
