@@ -6,6 +6,7 @@ import argparse
 import logging
 import os
 import re
+import shutil
 import subprocess
 import sys
 
@@ -83,6 +84,8 @@ def test_parser_builds():
 def test_readme_python_examples_run(cache_dir, monkeypatch, tmp_path):
     """The API tour in the README is code that works."""
     monkeypatch.chdir(tmp_path)
+    # the floating-base tour loads a URDF from the current folder
+    shutil.copy(REPO / "tests" / "data" / "urdf" / "anymal_c.urdf", tmp_path)
     text = (REPO / "README.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", text, flags=re.DOTALL)
     assert len(blocks) >= 2
