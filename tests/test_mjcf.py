@@ -82,20 +82,26 @@ def mujoco_reference(model, q, qd) -> tuple[np.ndarray, np.ndarray]:
 
 
 def assert_matches_mujoco(dyn, path: Path, seed: int = 0) -> None:
-    """gagen's M + diag(armature) and inverse dynamics at qdd = 0 equal MuJoCo's mj_fullM
-    and qfrc_bias at random states, coordinates in MuJoCo's qpos order."""
+    """gagen's M (which holds the joints' armature) and inverse dynamics at qdd = 0
+    without the joints' damping and friction (MuJoCo keeps those in qfrc_passive and its
+    constraints) equal MuJoCo's mj_fullM and qfrc_bias at random states, coordinates in
+    MuJoCo's qpos order."""
     model = mujoco.MjModel.from_xml_path(str(path))
     names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}"
              for j in range(model.njnt)]
     assert dyn.coordinates == names
-    armature = np.array([t["armature"] for t in joint_terms(model).values()])
+    terms = joint_terms(model)
+    for name, values in terms.items():  # MuJoCo's joint terms are gagen's parameters
+        for key, value in values.items():
+            assert dyn.parameters[f"{key}_{name}"] == pytest.approx(value)
+    rigid = {f"{key}_{name}": 0.0 for name in terms for key in ("damping", "friction")}
     rng = np.random.default_rng(seed)
     for _ in range(STATES):
         q, qd = rng.uniform(-1.5, 1.5, model.nq), rng.uniform(-2, 2, model.nv)
         mass, bias = mujoco_reference(model, q, qd)
-        ours = dyn.mass_matrix(q) + np.diag(armature)
+        ours = dyn.mass_matrix(q)
         np.testing.assert_allclose(ours, mass, rtol=RTOL, atol=RTOL * np.abs(mass).max())
-        tau = dyn.inverse_dynamics(q, qd, np.zeros(model.nv))
+        tau = dyn.inverse_dynamics(q, qd, np.zeros(model.nv), p=rigid)
         np.testing.assert_allclose(tau, bias, rtol=RTOL, atol=RTOL * np.abs(bias).max())
 
 
@@ -155,10 +161,9 @@ def test_mass_parameters_follow_mujoco_body_mass(features):
     body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "upper")
     assert dyn.parameters["m_upper"] == pytest.approx(model.body_mass[body])
     model.body_mass[body] = 4.0
-    armature = np.diag([t["armature"] for t in joint_terms(model).values()])
     q = np.random.default_rng(3).uniform(-1, 1, model.nq)
     mass, _ = mujoco_reference(model, q, np.zeros(model.nv))
-    np.testing.assert_allclose(dyn.mass_matrix(q, p={"m_upper": 4.0}) + armature, mass,
+    np.testing.assert_allclose(dyn.mass_matrix(q, p={"m_upper": 4.0}), mass,
                                rtol=RTOL, atol=RTOL)
 
 

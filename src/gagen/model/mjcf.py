@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import warnings
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -48,7 +49,7 @@ from .model import (
     exact_units,
     vector,
 )
-from .parameters import parameterize_mass_properties
+from .parameters import parameterize_joint_terms, parameterize_mass_properties
 
 _MESSAGE_LENGTH = 500  # of MuJoCo's compile error, quoted in a ModelError
 _FREE, _BALL, _SLIDE, _HINGE = 0, 1, 2, 3  # mujoco.mjtJoint
@@ -124,9 +125,23 @@ def model_from_mjmodel(mj, source: str = "<mjcf>", strict: bool = False) -> Mode
     if not any(body.joint.moves for body in bodies):
         raise ModelError(source, "<worldbody>", "no hinge or slide joint: nothing can move")
     g, direction = _gravity(mj)
+    bodies = _with_joint_terms(bodies, joint_terms(mj, source))
     model = Model(name=names.model, bodies=tuple(bodies), parameters={"g": g},
                   gravity=vector([-sp.Symbol("g") * d for d in direction]), source=source)
-    return parameterize_mass_properties(merge_fixed_joints(model))
+    return parameterize_joint_terms(parameterize_mass_properties(merge_fixed_joints(model)))
+
+
+def _with_joint_terms(bodies: list[Body], terms: dict[str, dict[str, float]]) -> list[Body]:
+    """MuJoCo's damping, frictionloss and armature as gagen's joint terms (which become
+    the runtime parameters damping_<joint>, friction_<joint>, armature_<joint>)."""
+    out = []
+    for body in bodies:
+        values = terms.get(body.joint.name)
+        if values is not None and body.joint.moves and not body.joint.floating:
+            body = replace(body, joint=replace(body.joint, **{
+                key: _number(value) for key, value in values.items()}))
+        out.append(body)
+    return out
 
 
 def joint_terms(mj, source: str = "<mjcf>") -> dict[str, dict[str, float]]:
