@@ -66,6 +66,12 @@ class Reference:
     def ours(self, v):
         return np.asarray(v)[..., self.v_order]
 
+    def joint_forces(self, v):
+        """The URDF joints' damping and Coulomb friction as Pinocchio parsed them, which gagen
+        puts in the dynamics and Pinocchio's rnea and aba leave out."""
+        v = self.v(v)
+        return self.ours(self.model.damping * v + self.model.friction * np.sign(v))
+
     def mass_matrix(self, q):
         M = np.array(pin.crba(self.model, self.data, self.q(q)))
         M = np.triu(M) + np.triu(M, 1).T
@@ -102,8 +108,11 @@ def check_against_pinocchio(dyn, ref: Reference, seed: int = 0, states: int = 3)
         q, v, a = random_state(dyn, rng)
         qp, vp, ap = ref.q(q), ref.v(v), ref.v(a)
         close(dyn.mass_matrix(q), ref.mass_matrix(q), "M")
-        close(dyn.inverse_dynamics(q, v, a), ref.ours(pin.rnea(m, d, qp, vp, ap)), "rnea")
-        close(dyn.forward_dynamics(q, v, a), ref.ours(pin.aba(m, d, qp, vp, ap)), "aba")
+        friction = ref.joint_forces(v)
+        tau = a + friction  # the torque Pinocchio's aba sees is a less the joint forces
+        close(dyn.inverse_dynamics(q, v, a),
+              ref.ours(pin.rnea(m, d, qp, vp, ap)) + friction, "rnea")
+        close(dyn.forward_dynamics(q, v, tau), ref.ours(pin.aba(m, d, qp, vp, ap)), "aba")
         close(dyn.gravity(q), ref.ours(pin.computeGeneralizedGravity(m, d, qp)), "gravity")
         close(dyn.energy(q, v)[0], pin.computeKineticEnergy(m, d, qp, vp), "kinetic energy")
         q2, _, _ = random_state(dyn, rng)
@@ -131,10 +140,10 @@ def check_against_pinocchio(dyn, ref: Reference, seed: int = 0, states: int = 3)
         assert frame.split(":")[-1] == m.frames[pinocchio_frame(m, *dyn.info.frames[-1][::2])].name
         wrench = rng.normal(size=6)
         forces = ref.fext(q, pinocchio_frame(m, *dyn.info.frames[-1][::2]), wrench)
-        close(dyn.forward_dynamics(q, v, a, fext={frame: wrench}),
+        close(dyn.forward_dynamics(q, v, tau, fext={frame: wrench}),
               ref.ours(pin.aba(m, d, qp, vp, ap, forces)), "aba with fext")
         close(dyn.inverse_dynamics(q, v, a, fext={frame: wrench}),
-              ref.ours(pin.rnea(m, d, qp, vp, ap, forces)), "rnea with fext")
+              ref.ours(pin.rnea(m, d, qp, vp, ap, forces)) + friction, "rnea with fext")
 
 
 def pinocchio_frame(model, name: str, kind: str) -> int:
