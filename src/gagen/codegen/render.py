@@ -281,8 +281,10 @@ class _Kernels:
     them, and splits the large ones into segment functions (codegen/segments.py)."""
 
     def __init__(self, ident: str, cse: CSEResult, printer: GagenCPrinter,
-                 config: CodegenConfig):
+                 config: CodegenConfig, arrays: dict[str, tuple[str, ...]] = KERNEL_ARRAYS,
+                 looped: tuple[str, ...] = LOOPED_KERNELS):
         self.ident, self.cse, self.printer = ident, cse, printer
+        self.arrays, self.looped = arrays, looped  # another module's kernels: its own
         self.split_chars, self.segment_chars = config.split_chars, config.segment_chars
         self.printed: dict[sp.Symbol, str] = {}
         self.segments: list[Segment] = []  # of every split kernel, in order
@@ -321,12 +323,12 @@ class _Kernels:
         segments, workspace = split(f"{self.ident}_{kernel}", _trig(printer, all_exprs),
                                     statements, outputs, externals=dict(reads),
                                     segment_chars=self.segment_chars)
-        arrays = KERNEL_ARRAYS[kernel]
+        arrays = self.arrays[kernel]
         params = ", ".join([f"const double *restrict {a}" for a in arrays[:-1]]
                            + [f"double *restrict {arrays[-1]}"])
         for segment in segments:
             segment.params = params
-            segment.looped = kernel in LOOPED_KERNELS
+            segment.looped = kernel in self.looped
         block.segments, block.workspace = segments, workspace
         block.params, block.args = params, ", ".join(arrays)
         self.segments.extend(segments)
