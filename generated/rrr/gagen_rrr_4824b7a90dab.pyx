@@ -6,6 +6,8 @@
 import numpy as np
 cimport numpy as cnp
 from libc.math cimport NAN, isfinite
+from libc.stdint cimport int32_t, int64_t
+from libc.stdlib cimport free, malloc
 
 from cpython.exc cimport PyErr_CheckSignals
 from gagen.errors import NonFiniteStateError, SingularMassMatrixError
@@ -52,7 +54,7 @@ cdef extern from "integrator.h" nogil:
         GAGEN_METHOD_DOPRI5
         GAGEN_METHOD_RK4
 
-KEY = "79f52adb4ad8ce5005e5104512bdf00b0d112d9fd7bc2fa1a1e7b63b5f3701d6"
+KEY = "714d3fd29b70a4ff000e7054a02b3cd93e6dbffc143b4034f88b4e3c682e8283"
 MANIFEST_HEX = "7b226a6f696e7473223a205b7b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227131222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d2c207b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227132222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d2c207b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227133222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d5d2c20226e616d65223a2022727272222c2022706172616d6574657273223a205b5b2267222c20392e38315d2c205b224c31222c20302e345d2c205b224c32222c20302e345d2c205b224c33222c20302e345d2c205b226d31222c2036302e305d2c205b226d32222c2035302e305d2c205b226d33222c2034302e305d2c205b22493178222c20302e385d2c205b22493179222c20302e3037355d2c205b2249317a222c20302e385d2c205b22493278222c20302e363636363636363636363636363636365d2c205b22493279222c20302e303632355d2c205b2249327a222c20302e363636363636363636363636363636365d2c205b22493378222c20302e353333333333333333333333333333335d2c205b22493379222c20302e30355d2c205b2249337a222c20302e353333333333333333333333333333335d5d2c2022736f75726365223a20226275696c74696e3a727272227d"
 # The model's names are not in this file (it holds code, and identifiers only); gagen keeps
 # them with the model. The defaults are printed numbers, in the order of p.
@@ -399,6 +401,183 @@ cdef class CompiledSimulation:
         with nogil:
             status = rrr_control_torques(&self.ctl, self.p, m, pt, py, pr)
         return res, status
+
+
+cdef cnp.ndarray _table(object a, Py_ssize_t runs, Py_ssize_t cols, int typenum, str name):
+    """a, a C-contiguous array of the given type and shape (runs, cols) or (1, cols)."""
+    if not (type(a) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>a) == typenum
+            and cnp.PyArray_IS_C_CONTIGUOUS(<cnp.ndarray>a) and cnp.PyArray_NDIM(<cnp.ndarray>a) == 2
+            and cnp.PyArray_DIM(<cnp.ndarray>a, 1) == cols
+            and (cnp.PyArray_DIM(<cnp.ndarray>a, 0) == runs or cnp.PyArray_DIM(<cnp.ndarray>a, 0) == 1)):
+        raise ValueError(f"{name} must be a C-contiguous array of shape ({runs}, {cols}) or "
+                         f"(1, {cols}) and type number {typenum}")
+    return <cnp.ndarray>a
+
+
+cdef double *_output(object a, Py_ssize_t runs, Py_ssize_t m, str name) except NULL:
+    """The data of a C-contiguous float64 array of shape (runs, m, NQ), written in place."""
+    if not (type(a) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>a) == cnp.NPY_DOUBLE
+            and cnp.PyArray_IS_C_CONTIGUOUS(<cnp.ndarray>a) and a.shape == (runs, m, NQ)):
+        raise ValueError(f"{name} must be a C-contiguous float64 array of shape "
+                         f"({runs}, {m}, {NQ})")
+    return _data(<cnp.ndarray>a)
+
+
+cdef inline Py_ssize_t _row_step(cnp.ndarray a) noexcept:
+    """Rows of a _table to advance per run: 0 for one row shared by every run."""
+    return 1 if cnp.PyArray_DIM(a, 0) > 1 else 0
+
+
+cdef class CompiledBatch:
+    """Runs of one method over one time grid, each with its own initial state, parameters
+    and controller (a table has one row per run, or one row for all), written into rows of
+    preallocated arrays q, qd, tau (N, m, NQ) and stats (N, 5: status, nfev, nsteps,
+    naccepted, nrejected). Every run is the C call of CompiledSimulation.run, so it gives
+    the same numbers. run(start, stop) integrates a slice without the GIL: threads may run
+    disjoint slices at once; stop() makes them all return at their next poll."""
+
+    cdef int code, m
+    cdef Py_ssize_t N
+    cdef double t0, t1, rtol, first_step, max_step, h
+    cdef long max_steps
+    cdef double at[2 * NQ]
+    cdef int stop_flag
+    cdef object _keep
+    cdef const double *te
+    cdef const double *y0
+    cdef const double *p
+    cdef const int32_t *kind
+    cdef const int32_t *gc
+    cdef const double *kp
+    cdef const double *kd
+    cdef const double *target
+    cdef const double *tq0
+    cdef const double *tqf
+    cdef const double *tTp
+    cdef Py_ssize_t y_step, p_step, c_step
+    cdef double *q
+    cdef double *qd
+    cdef double *tau
+    cdef int64_t *stats
+
+    def __init__(self, str method, double t0, double t1, t_eval, double rtol, atol,
+                 double first_step, double max_step, long max_steps, double h, y0, p,
+                 kind, gravity_compensation, kp, kd, target, traj_q0, traj_qf, traj_Tp,
+                 q, qd, tau, stats):
+        if method == "dopri5":
+            self.code = GAGEN_METHOD_DOPRI5
+        elif method == "rk4":
+            self.code = GAGEN_METHOD_RK4
+        else:
+            raise ValueError(f"unknown compiled method '{method}' (dopri5 or rk4)")
+        cdef Py_ssize_t i
+        cdef cnp.ndarray a = _vector(atol, 2 * NQ, "atol")
+        for i in range(2 * NQ):
+            self.at[i] = _data(a)[i]
+        cdef cnp.ndarray te = np.ascontiguousarray(t_eval, dtype=np.float64)
+        self.m = cnp.PyArray_SIZE(te)
+        self.N = np.shape(q)[0]
+        cdef Py_ssize_t N = self.N
+        cdef cnp.ndarray y = _table(y0, N, 2 * NQ, cnp.NPY_DOUBLE, "y0")
+        cdef cnp.ndarray pp = _table(p, N, NP, cnp.NPY_DOUBLE, "p")
+        cdef cnp.ndarray kd_ = _table(kind, N, 1, cnp.NPY_INT32, "kind")
+        cdef cnp.ndarray gc = _table(gravity_compensation, N, 1, cnp.NPY_INT32,
+                                     "gravity_compensation")
+        cdef cnp.ndarray tp = _table(traj_Tp, N, 1, cnp.NPY_DOUBLE, "traj_Tp")
+        cs = [_table(v, N, NQ, cnp.NPY_DOUBLE, name) for v, name in
+              ((kp, "kp"), (kd, "kd"), (target, "target"), (traj_q0, "traj_q0"),
+               (traj_qf, "traj_qf"))]
+        if len({c.shape[0] for c in cs + [kd_, gc, tp]}) != 1:
+            raise ValueError("the controller tables must all have one row, or one per run")
+        self.q = _output(q, N, self.m, "q")
+        self.qd = _output(qd, N, self.m, "qd")
+        self.tau = _output(tau, N, self.m, "tau")
+        cdef cnp.ndarray st = _table(stats, N, 5, cnp.NPY_INT64, "stats")
+        if st.shape[0] != N:
+            raise ValueError(f"stats must have shape ({N}, 5)")
+        self._keep = [te, y, pp, kd_, gc, tp, cs, q, qd, tau, st]  # the pointers go into them
+        self.t0, self.t1, self.rtol, self.h = t0, t1, rtol, h
+        self.first_step, self.max_step, self.max_steps = first_step, max_step, max_steps
+        self.te = _data(te)
+        self.y0, self.y_step = _data(y), _row_step(y)
+        self.p, self.p_step = _data(pp), _row_step(pp)
+        self.kind = <const int32_t *>cnp.PyArray_DATA(kd_)
+        self.gc = <const int32_t *>cnp.PyArray_DATA(gc)
+        self.kp = _data(<cnp.ndarray>cs[0])
+        self.kd = _data(<cnp.ndarray>cs[1])
+        self.target = _data(<cnp.ndarray>cs[2])
+        self.tq0 = _data(<cnp.ndarray>cs[3])
+        self.tqf = _data(<cnp.ndarray>cs[4])
+        self.tTp = _data(tp)
+        self.c_step = _row_step(tp)
+        self.stats = <int64_t *>cnp.PyArray_DATA(st)
+        self.stop_flag = 0
+
+    def run(self, Py_ssize_t start, Py_ssize_t stop):
+        """Integrate runs start .. stop-1 without the GIL; False if stop() ended it early."""
+        if not 0 <= start <= stop <= self.N:
+            raise ValueError(f"runs {start}:{stop} are not within 0:{self.N}")
+        cdef double *y = <double *>malloc((self.m + 1) * 2 * NQ * sizeof(double))
+        if y == NULL:
+            raise MemoryError()
+        cdef Py_ssize_t i
+        with nogil:
+            for i in range(start, stop):
+                if self.stop_flag:
+                    break
+                self._one(i, y)
+        free(y)
+        return not self.stop_flag
+
+    def stop(self):
+        """Make every run() in progress return at its next poll (every 256 steps)."""
+        self.stop_flag = 1
+
+    cdef void _one(self, Py_ssize_t i, double *y) noexcept nogil:
+        cdef gagen_control ctl
+        cdef gagen_ode_stats st
+        cdef Py_ssize_t c = i * self.c_step, r, k, m = self.m
+        cdef const double *p = self.p + i * self.p_step * NP
+        cdef double *q = self.q + i * m * NQ
+        cdef double *qd = self.qd + i * m * NQ
+        cdef double *tau = self.tau + i * m * NQ
+        ctl.kind = self.kind[c]
+        ctl.gravity_compensation = self.gc[c]
+        ctl.kp = self.kp + c * NQ
+        ctl.kd = self.kd + c * NQ
+        ctl.target = self.target + c * NQ
+        ctl.traj_q0 = self.tq0 + c * NQ
+        ctl.traj_qf = self.tqf + c * NQ
+        ctl.traj_Tp = self.tTp[c]
+        ctl.poll = _poll_flag
+        ctl.poll_ctx = <void *>&self.stop_flag
+        st.nfev = st.nsteps = st.naccepted = st.nrejected = 0
+        cdef int status = rrr_simulate(self.code, &ctl, p, self.t0, self.t1,
+                                               self.y0 + i * self.y_step * 2 * NQ, self.rtol,
+                                               self.at, self.first_step, self.max_step,
+                                               self.max_steps, self.h, self.te, m, y, &st)
+        for r in range(m):
+            for k in range(NQ):
+                q[r * NQ + k] = y[r * 2 * NQ + k]
+                qd[r * NQ + k] = y[r * 2 * NQ + NQ + k]
+        if status == 0:
+            rrr_control_torques(&ctl, p, m, self.te, y, tau)
+        else:
+            for k in range(m * NQ):
+                tau[k] = NAN
+        cdef int64_t *s = self.stats + i * 5
+        s[0] = status
+        s[1] = st.nfev
+        s[2] = st.nsteps
+        s[3] = st.naccepted
+        s[4] = st.nrejected
+
+
+cdef int _poll_flag(void *ctx) noexcept nogil:
+    """A batch's poll: stop once the flag at ctx is set. The batch's threads cannot run
+    Python's signal handlers (only the main thread does), so the main thread catches Ctrl-C
+    and sets the flag (CompiledBatch.stop)."""
+    return (<int *>ctx)[0]
 
 
 cdef int _poll_signals(void *ctx) noexcept nogil:
