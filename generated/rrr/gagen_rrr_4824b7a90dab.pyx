@@ -27,6 +27,13 @@ cdef extern from "rrr.h" nogil:
                                       const double *p, double *tau)
     void rrr_energy(const double *q, const double *qd, const double *p, double *TV)
     void rrr_gravity(const double *q, const double *p, double *G)
+    void rrr_placements(const double *q, const double *p, double *X)
+    void rrr_frame_offsets(const double *p, double *F)
+    int rrr_frame_placement(const double *q, const double *p, int frame, double *R,
+                                    double *pos)
+    int rrr_frame_jacobian(const double *q, const double *p, int frame, double *J)
+    int rrr_frame_velocity(const double *q, const double *qd, const double *p,
+                                   int frame, double *v)
     int rrr_simulate(int method, const gagen_control *c, const double *p, double t0,
                              double t1, const double *y0, double rtol, const double *atol,
                              double first_step, double max_step, long max_steps, double h,
@@ -50,18 +57,26 @@ cdef extern from "integrator.h" nogil:
         double traj_Tp
         int (*poll)(void *ctx) noexcept nogil
         void *poll_ctx
+        const double *feedforward
+        int nframes
+        const int *frames
+        const double *wrenches
     enum:
         GAGEN_METHOD_DOPRI5
         GAGEN_METHOD_RK4
 
-KEY = "714d3fd29b70a4ff000e7054a02b3cd93e6dbffc143b4034f88b4e3c682e8283"
-MANIFEST_HEX = "7b226a6f696e7473223a205b7b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227131222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d2c207b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227132222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d2c207b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227133222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d5d2c20226e616d65223a2022727272222c2022706172616d6574657273223a205b5b2267222c20392e38315d2c205b224c31222c20302e345d2c205b224c32222c20302e345d2c205b224c33222c20302e345d2c205b226d31222c2036302e305d2c205b226d32222c2035302e305d2c205b226d33222c2034302e305d2c205b22493178222c20302e385d2c205b22493179222c20302e3037355d2c205b2249317a222c20302e385d2c205b22493278222c20302e363636363636363636363636363636365d2c205b22493279222c20302e303632355d2c205b2249327a222c20302e363636363636363636363636363636365d2c205b22493378222c20302e353333333333333333333333333333335d2c205b22493379222c20302e30355d2c205b2249337a222c20302e353333333333333333333333333333335d5d2c2022736f75726365223a20226275696c74696e3a727272227d"
+KEY = "17208e3982e864a0d7f85ee5f339eba16d531ecc0e170372fde4f542fa6a9bd6"
+MANIFEST_HEX = "7b22626f64696573223a205b5b2d312c20312c20305d2c205b302c20312c20315d2c205b312c20312c20325d5d2c20226672616d6573223a205b5b226c696e6b31222c20302c20226c696e6b225d2c205b227131222c20302c20226a6f696e74225d2c205b226c696e6b32222c20312c20226c696e6b225d2c205b227132222c20312c20226a6f696e74225d2c205b226c696e6b33222c20322c20226c696e6b225d2c205b227133222c20322c20226a6f696e74225d5d2c20226a6f696e7473223a205b7b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227131222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d2c207b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227132222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d2c207b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227133222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d5d2c20226e616d65223a2022727272222c2022706172616d6574657273223a205b5b2267222c20392e38315d2c205b224c31222c20302e345d2c205b224c32222c20302e345d2c205b224c33222c20302e345d2c205b226d31222c2036302e305d2c205b226d32222c2035302e305d2c205b226d33222c2034302e305d2c205b22493178222c20302e385d2c205b22493179222c20302e3037355d2c205b2249317a222c20302e385d2c205b22493278222c20302e363636363636363636363636363636365d2c205b22493279222c20302e303632355d2c205b2249327a222c20302e363636363636363636363636363636365d2c205b22493378222c20302e353333333333333333333333333333335d2c205b22493379222c20302e30355d2c205b2249337a222c20302e353333333333333333333333333333335d5d2c2022736f75726365223a20226275696c74696e3a727272227d"
 # The model's names are not in this file (it holds code, and identifiers only); gagen keeps
 # them with the model. The defaults are printed numbers, in the order of p.
 PARAMETER_DEFAULTS = (9.81, 0.4, 0.4, 0.4, 60.0, 50.0, 40.0, 0.8, 0.075, 0.8, 0.6666666666666666, 0.0625, 0.6666666666666666, 0.5333333333333333, 0.05, 0.5333333333333333, )
 
 cdef enum:
     NQ = 3
+    NV = 3
+    NY = 6
+    NB = 3
+    NF = 6
     NP = 16
 
 ctypedef int (*kernel3)(const double *, const double *, const double *, const double *,
@@ -103,13 +118,19 @@ cdef int _mass(const double *a, const double *b, const double *c, const double *
     return 0
 
 
+cdef int _placements(const double *a, const double *b, const double *c, const double *p,
+                     double *out) noexcept nogil:
+    rrr_placements(a, p, out)
+    return 0
+
+
 def _converted(x, name):
     """The slow path (lists, other dtypes, non-contiguous arrays): gagen's one input check."""
     return np.ascontiguousarray(as_float_array(x, name))
 
 
-cdef inline cnp.ndarray _state(object x, str name):
-    """x as a C-contiguous float64 array of shape (NQ,) or (rows, NQ)."""
+cdef inline cnp.ndarray _state(object x, str name, Py_ssize_t size):
+    """x as a C-contiguous float64 array of shape (size,) or (rows, size)."""
     cdef cnp.ndarray a
     if type(x) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>x) == cnp.NPY_DOUBLE \
             and cnp.PyArray_IS_C_CONTIGUOUS(<cnp.ndarray>x):
@@ -118,12 +139,12 @@ cdef inline cnp.ndarray _state(object x, str name):
         a = _converted(x, name)
     cdef int nd = cnp.PyArray_NDIM(a)
     if nd == 1:
-        if cnp.PyArray_DIM(a, 0) == NQ:
+        if cnp.PyArray_DIM(a, 0) == size:
             return a
     elif nd == 2:
-        if cnp.PyArray_DIM(a, 1) == NQ:
+        if cnp.PyArray_DIM(a, 1) == size:
             return a
-    raise ValueError(f"{name} must have shape ({NQ},) or (N, {NQ}); got {np.shape(a)}")
+    raise ValueError(f"{name} must have shape ({size},) or (N, {size}); got {np.shape(a)}")
 
 
 cdef inline Py_ssize_t _rows(cnp.ndarray a, Py_ssize_t rows, str name) except -2:
@@ -149,7 +170,7 @@ cdef inline double *_data(cnp.ndarray a) noexcept:
 
 
 cdef inline Py_ssize_t _step(cnp.ndarray a) noexcept:
-    return NQ if cnp.PyArray_NDIM(a) == 2 else 0
+    return cnp.PyArray_DIM(a, 1) if cnp.PyArray_NDIM(a) == 2 else 0
 
 
 cdef class _Evaluator:
@@ -198,12 +219,18 @@ cdef class CompiledModel(_Evaluator):
     (their documentation is gagen.runtime.dynamics.Dynamics's); parameter_vector turns the
     p= forms other than a float64 array into one (None, a dict of overrides, a list)."""
 
+    cdef readonly object external_forces
+
+    def __init__(self, parameter_vector, external_forces=None):
+        self.parameter_vector = parameter_vector
+        self.external_forces = external_forces
+
     cdef object _run(self, kernel3 kernel, int nout, object x, object y, object z,
                      object p, str nx, str ny, str nz):
         """Evaluate a kernel at one state or at stacked states (one C loop, GIL released)."""
-        cdef cnp.ndarray a = _state(x, nx)
-        cdef cnp.ndarray b = _state(y, ny) if ny is not None else a
-        cdef cnp.ndarray c = _state(z, nz) if nz is not None else a
+        cdef cnp.ndarray a = _state(x, nx, NQ)
+        cdef cnp.ndarray b = _state(y, ny, NV) if ny is not None else a
+        cdef cnp.ndarray c = _state(z, nz, NV) if nz is not None else a
         cdef const double *pp = self._defaults
         cdef cnp.ndarray pa
         if p is not None:
@@ -246,26 +273,84 @@ cdef class CompiledModel(_Evaluator):
 
     def mass_matrix(self, q, p=None):
         """M(q), shape (n, n), or (N, n, n) for stacked q."""
-        out = self._run(_mass, NQ * NQ, q, None, None, p, "q", None, None)
+        out = self._run(_mass, NV * NV, q, None, None, p, "q", None, None)
         if cnp.PyArray_NDIM(<cnp.ndarray>out) == 1:
-            return out.reshape(NQ, NQ)
-        return out.reshape(-1, NQ, NQ)
+            return out.reshape(NV, NV)
+        return out.reshape(-1, NV, NV)
 
     def forcing(self, q, qd, tau, p=None):
         """F(q, qd, tau) such that M(q) qdd = F."""
-        return self._run(_forcing, NQ, q, qd, tau, p, "q", "qd", "tau")
+        return self._run(_forcing, NV, q, qd, tau, p, "q", "qd", "tau")
 
-    def forward_dynamics(self, q, qd, tau, p=None):
-        """qdd = M(q)^-1 F(q, qd, tau)."""
-        return self._run(_forward, NQ, q, qd, tau, p, "q", "qd", "tau")
+    def forward_dynamics(self, q, qd, tau, p=None, fext=None):
+        """qdd = M(q)^-1 F(q, qd, tau [+ J^T w of the wrenches fext])."""
+        if fext is not None:
+            tau = as_float_array(tau, "tau") + self.external_forces(q, fext, p)
+        return self._run(_forward, NV, q, qd, tau, p, "q", "qd", "tau")
 
-    def inverse_dynamics(self, q, qd, qdd, p=None):
-        """The joint torques (forces for prismatic joints) that give qdd."""
-        return self._run(_inverse, NQ, q, qd, qdd, p, "q", "qd", "qdd")
+    def inverse_dynamics(self, q, qd, qdd, p=None, fext=None):
+        """The joint torques (forces for prismatic joints) that give qdd [under fext]."""
+        tau = self._run(_inverse, NV, q, qd, qdd, p, "q", "qd", "qdd")
+        if fext is not None:
+            tau = tau - self.external_forces(q, fext, p)
+        return tau
+
+    def placements(self, q, p=None):
+        """Per body, its orientation (row-major), origin and joint axis in the world."""
+        return self._run(_placements, 15 * NB, q, None, None, p, "q", None, None)
+
+    def frame_offsets(self, p=None):
+        """Per frame, its axes (row-major) and origin in its body's frame."""
+        cdef const double *pp = self._defaults
+        cdef cnp.ndarray pa
+        if p is not None:
+            pa = self._parameters(p)
+            pp = <const double *>cnp.PyArray_DATA(pa)
+        cdef cnp.npy_intp dims[1]
+        dims[0] = 12 * NF
+        cdef cnp.ndarray out = cnp.PyArray_EMPTY(1, dims, cnp.NPY_DOUBLE, 0)
+        rrr_frame_offsets(pp, _data(out))
+        return out
+
+    def frame(self, int which, int frame, q, qd, p=None):
+        """A frame's placement (which 0: R and origin, 12 values), Jacobian (1: 6 x NV) or
+        velocity (2: 6 values) at one state or stacked states."""
+        if not 0 <= frame < NF:
+            raise IndexError(f"frame {frame} out of range (0 .. {NF - 1})")
+        cdef cnp.ndarray a = _state(q, "q", NQ)
+        cdef cnp.ndarray b = _state(qd, "qd", NV) if which == 2 else a
+        cdef const double *pp = self._defaults
+        cdef cnp.ndarray pa
+        if p is not None:
+            pa = self._parameters(p)
+            pp = <const double *>cnp.PyArray_DATA(pa)
+        cdef Py_ssize_t rows = _rows(a, -1, "q")
+        if which == 2:
+            rows = _rows(b, rows, "qd")
+        cdef int nout = 12 if which == 0 else (6 * NV if which == 1 else 6)
+        cdef cnp.npy_intp dims[2]
+        dims[0] = rows if rows >= 0 else 1
+        dims[1] = nout
+        cdef cnp.ndarray out = cnp.PyArray_EMPTY(2, dims, cnp.NPY_DOUBLE, 0)
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *po = _data(out)
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), i, count = dims[0]
+        with nogil:
+            for i in range(count):
+                if which == 0:
+                    rrr_frame_placement(pa_ + i * sa, pp, frame, po + i * nout,
+                                                po + i * nout + 9)
+                elif which == 1:
+                    rrr_frame_jacobian(pa_ + i * sa, pp, frame, po + i * nout)
+                else:
+                    rrr_frame_velocity(pa_ + i * sa, pb + i * sb, pp, frame,
+                                               po + i * nout)
+        return out if rows >= 0 else out[0]
 
     def gravity(self, q, p=None):
         """The gravity torques g(q) = inverse_dynamics(q, 0, 0)."""
-        return self._run(_gravity, NQ, q, None, None, p, "q", None, None)
+        return self._run(_gravity, NV, q, None, None, p, "q", None, None)
 
     def energy(self, q, qd, p=None):
         """(kinetic, potential): floats, or arrays of shape (N,) for stacked states."""
@@ -297,6 +382,29 @@ cdef inline cnp.ndarray _matrix(Py_ssize_t rows, Py_ssize_t cols):
     return cnp.PyArray_EMPTY(2, dims, cnp.NPY_DOUBLE, 0)
 
 
+cdef inline void _split_states(const double *y, Py_ssize_t m, double *q,
+                               double *qd) noexcept nogil:
+    """Rows of y = [q, qd] (m x NY) into q (m x NQ) and qd (m x NV)."""
+    cdef Py_ssize_t r, k
+    for r in range(m):
+        for k in range(NQ):
+            q[r * NQ + k] = y[r * NY + k]
+        for k in range(NV):
+            qd[r * NV + k] = y[r * NY + NQ + k]
+
+
+def _frame_wrenches(frames, wrenches):
+    """Frame numbers (int32) and their wrenches ((count, 6) float64), checked."""
+    fr = np.ascontiguousarray(np.zeros(0) if frames is None else frames, dtype=np.int32).ravel()
+    wr = np.ascontiguousarray(np.zeros((0, 6)) if wrenches is None else wrenches,
+                              dtype=np.float64).reshape(-1, 6)
+    if wr.shape[0] != fr.size or np.any(fr < 0) or np.any(fr >= NF) \
+            or not np.all(np.isfinite(wr)):
+        raise ValueError(f"frames must be frame numbers in 0 .. {NF - 1}, one finite wrench "
+                         "(6 values) each")
+    return fr, wr
+
+
 cdef class CompiledSimulation:
     """The robot, its controller and gagen's C integrators, run without Python per step."""
 
@@ -306,12 +414,18 @@ cdef class CompiledSimulation:
 
     def __init__(self, CompiledModel model, p, int kind, kp=None, kd=None, target=None,
                  bint gravity_compensation=False, traj_q0=None, traj_qf=None,
-                 double traj_Tp=1.0):
+                 double traj_Tp=1.0, feedforward=None, frames=None, wrenches=None):
         params = model._parameters(model.parameter_vector(None) if p is None else p)
-        arrays = [params] + [None if v is None else _vector(v, NQ, name) for v, name in
-                             ((kp, "kp"), (kd, "kd"), (target, "target"),
-                              (traj_q0, "trajectory q0"), (traj_qf, "trajectory qf"))]
-        self._keep = arrays  # the C structure points into them (NULL for None: zeros)
+        arrays = [params] + [None if v is None else _vector(v, size, name) for v, name, size in
+                             ((kp, "kp", NV), (kd, "kd", NV), (target, "target", NV),
+                              (traj_q0, "trajectory q0", NQ), (traj_qf, "trajectory qf", NQ),
+                              (feedforward, "feedforward", NV))]
+        fr, wr = _frame_wrenches(frames, wrenches)
+        self._keep = arrays + [fr, wr]  # the C structure points into them (NULL: zeros)
+        self.ctl.feedforward = _data_or_null(arrays[6])
+        self.ctl.nframes = cnp.PyArray_SIZE(fr)
+        self.ctl.frames = <const int *>cnp.PyArray_DATA(fr)
+        self.ctl.wrenches = _data(wr)
         self.p = _data(arrays[0])
         self.ctl.kind = kind
         self.ctl.kp = _data_or_null(arrays[1])
@@ -338,25 +452,26 @@ cdef class CompiledSimulation:
             code = GAGEN_METHOD_RK4
         else:
             raise ValueError(f"unknown compiled method '{method}' (dopri5 or rk4)")
-        cdef double at[2 * NQ]
-        cdef double y0[2 * NQ]
+        cdef double at[NY]
+        cdef double y0[NY]
         cdef Py_ssize_t i, r
         cdef cnp.ndarray a
-        cdef cnp.ndarray q_0 = _vector(q0, NQ, "q0"), qd_0 = _vector(qd0, NQ, "qd0")
+        cdef cnp.ndarray q_0 = _vector(q0, NQ, "q0"), qd_0 = _vector(qd0, NV, "qd0")
         for i in range(NQ):
             y0[i] = _data(q_0)[i]
+        for i in range(NV):
             y0[NQ + i] = _data(qd_0)[i]
         if type(atol) is float:
-            for i in range(2 * NQ):
+            for i in range(NY):
                 at[i] = <double>atol
         else:
-            a = _vector(atol, 2 * NQ, "atol")
-            for i in range(2 * NQ):
+            a = _vector(atol, NY, "atol")
+            for i in range(NY):
                 at[i] = _data(a)[i]
         cdef cnp.ndarray te = np.ascontiguousarray(t_eval, dtype=np.float64)
         cdef int m = cnp.PyArray_SIZE(te)
-        cdef cnp.ndarray y = _matrix(m, 2 * NQ)
-        cdef cnp.ndarray q = _matrix(m, NQ), qd = _matrix(m, NQ), tau = _matrix(m, NQ)
+        cdef cnp.ndarray y = _matrix(m, NY)
+        cdef cnp.ndarray q = _matrix(m, NQ), qd = _matrix(m, NV), tau = _matrix(m, NV)
         cdef double *pt = _data(te)
         cdef double *py = _data(y)
         cdef double *pq = _data(q)
@@ -370,14 +485,11 @@ cdef class CompiledSimulation:
             status = rrr_simulate(code, &self.ctl, self.p, t0, t1, y0, rtol, at,
                                           first_step, max_step, max_steps, h, pt, m, py,
                                           &stats)
-            for r in range(m):
-                for i in range(NQ):
-                    pq[r * NQ + i] = py[r * 2 * NQ + i]
-                    pqd[r * NQ + i] = py[r * 2 * NQ + NQ + i]
+            _split_states(py, m, pq, pqd)
             if status == 0:  # the controller passed the integrator's checks: no new status
                 rrr_control_torques(&self.ctl, self.p, m, pt, py, ptau)
             else:
-                for i in range(m * NQ):
+                for i in range(m * NV):
                     ptau[i] = NAN
         self.ctl.poll_ctx = NULL
         if raised:
@@ -391,9 +503,9 @@ cdef class CompiledSimulation:
         cdef cnp.ndarray tt = np.ascontiguousarray(t, dtype=np.float64)
         cdef cnp.ndarray yy = np.ascontiguousarray(y, dtype=np.float64)
         cdef Py_ssize_t m = tt.size
-        if yy.ndim != 2 or yy.shape[0] != m or yy.shape[1] != 2 * NQ:
-            raise ValueError(f"y must have shape ({m}, {2 * NQ})")
-        cdef cnp.ndarray res = _matrix(m, NQ)
+        if yy.ndim != 2 or yy.shape[0] != m or yy.shape[1] != NY:
+            raise ValueError(f"y must have shape ({m}, {NY})")
+        cdef cnp.ndarray res = _matrix(m, NV)
         cdef int status
         cdef double *pt = _data(tt)
         cdef double *py = _data(yy)
@@ -414,12 +526,13 @@ cdef cnp.ndarray _table(object a, Py_ssize_t runs, Py_ssize_t cols, int typenum,
     return <cnp.ndarray>a
 
 
-cdef double *_output(object a, Py_ssize_t runs, Py_ssize_t m, str name) except NULL:
-    """The data of a C-contiguous float64 array of shape (runs, m, NQ), written in place."""
+cdef double *_output(object a, Py_ssize_t runs, Py_ssize_t m, Py_ssize_t size,
+                     str name) except NULL:
+    """The data of a C-contiguous float64 array of shape (runs, m, size), written in place."""
     if not (type(a) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>a) == cnp.NPY_DOUBLE
-            and cnp.PyArray_IS_C_CONTIGUOUS(<cnp.ndarray>a) and a.shape == (runs, m, NQ)):
+            and cnp.PyArray_IS_C_CONTIGUOUS(<cnp.ndarray>a) and a.shape == (runs, m, size)):
         raise ValueError(f"{name} must be a C-contiguous float64 array of shape "
-                         f"({runs}, {m}, {NQ})")
+                         f"({runs}, {m}, {size})")
     return _data(<cnp.ndarray>a)
 
 
@@ -431,7 +544,7 @@ cdef inline Py_ssize_t _row_step(cnp.ndarray a) noexcept:
 cdef class CompiledBatch:
     """Runs of one method over one time grid, each with its own initial state, parameters
     and controller (a table has one row per run, or one row for all), written into rows of
-    preallocated arrays q, qd, tau (N, m, NQ) and stats (N, 5: status, nfev, nsteps,
+    preallocated arrays q (N, m, nq), qd, tau (N, m, nv) and stats (N, 5: status, nfev, nsteps,
     naccepted, nrejected). Every run is the C call of CompiledSimulation.run, so it gives
     the same numbers. run(start, stop) integrates a slice without the GIL: threads may run
     disjoint slices at once; stop() makes them all return at their next poll."""
@@ -440,7 +553,7 @@ cdef class CompiledBatch:
     cdef Py_ssize_t N
     cdef double t0, t1, rtol, first_step, max_step, h
     cdef long max_steps
-    cdef double at[2 * NQ]
+    cdef double at[NY]
     cdef int stop_flag
     cdef object _keep
     cdef const double *te
@@ -453,6 +566,10 @@ cdef class CompiledBatch:
     cdef const double *target
     cdef const double *tq0
     cdef const double *tqf
+    cdef const double *ff
+    cdef int nframes
+    cdef const int *frames
+    cdef const double *wrenches
     cdef const double *tTp
     cdef Py_ssize_t y_step, p_step, c_step
     cdef double *q
@@ -463,7 +580,7 @@ cdef class CompiledBatch:
     def __init__(self, str method, double t0, double t1, t_eval, double rtol, atol,
                  double first_step, double max_step, long max_steps, double h, y0, p,
                  kind, gravity_compensation, kp, kd, target, traj_q0, traj_qf, traj_Tp,
-                 q, qd, tau, stats):
+                 q, qd, tau, stats, feedforward=None, frames=None, wrenches=None):
         if method == "dopri5":
             self.code = GAGEN_METHOD_DOPRI5
         elif method == "rk4":
@@ -471,31 +588,35 @@ cdef class CompiledBatch:
         else:
             raise ValueError(f"unknown compiled method '{method}' (dopri5 or rk4)")
         cdef Py_ssize_t i
-        cdef cnp.ndarray a = _vector(atol, 2 * NQ, "atol")
-        for i in range(2 * NQ):
+        cdef cnp.ndarray a = _vector(atol, NY, "atol")
+        for i in range(NY):
             self.at[i] = _data(a)[i]
         cdef cnp.ndarray te = np.ascontiguousarray(t_eval, dtype=np.float64)
         self.m = cnp.PyArray_SIZE(te)
         self.N = np.shape(q)[0]
         cdef Py_ssize_t N = self.N
-        cdef cnp.ndarray y = _table(y0, N, 2 * NQ, cnp.NPY_DOUBLE, "y0")
+        cdef cnp.ndarray y = _table(y0, N, NY, cnp.NPY_DOUBLE, "y0")
         cdef cnp.ndarray pp = _table(p, N, NP, cnp.NPY_DOUBLE, "p")
         cdef cnp.ndarray kd_ = _table(kind, N, 1, cnp.NPY_INT32, "kind")
         cdef cnp.ndarray gc = _table(gravity_compensation, N, 1, cnp.NPY_INT32,
                                      "gravity_compensation")
         cdef cnp.ndarray tp = _table(traj_Tp, N, 1, cnp.NPY_DOUBLE, "traj_Tp")
-        cs = [_table(v, N, NQ, cnp.NPY_DOUBLE, name) for v, name in
-              ((kp, "kp"), (kd, "kd"), (target, "target"), (traj_q0, "traj_q0"),
-               (traj_qf, "traj_qf"))]
+        if feedforward is None:
+            feedforward = np.zeros((np.shape(kp)[0], NV))
+        cs = [_table(v, N, size, cnp.NPY_DOUBLE, name) for v, name, size in
+              ((kp, "kp", NV), (kd, "kd", NV), (target, "target", NV),
+               (traj_q0, "traj_q0", NQ), (traj_qf, "traj_qf", NQ),
+               (feedforward, "feedforward", NV))]
+        fr, wr = _frame_wrenches(frames, wrenches)
         if len({c.shape[0] for c in cs + [kd_, gc, tp]}) != 1:
             raise ValueError("the controller tables must all have one row, or one per run")
-        self.q = _output(q, N, self.m, "q")
-        self.qd = _output(qd, N, self.m, "qd")
-        self.tau = _output(tau, N, self.m, "tau")
+        self.q = _output(q, N, self.m, NQ, "q")
+        self.qd = _output(qd, N, self.m, NV, "qd")
+        self.tau = _output(tau, N, self.m, NV, "tau")
         cdef cnp.ndarray st = _table(stats, N, 5, cnp.NPY_INT64, "stats")
         if st.shape[0] != N:
             raise ValueError(f"stats must have shape ({N}, 5)")
-        self._keep = [te, y, pp, kd_, gc, tp, cs, q, qd, tau, st]  # the pointers go into them
+        self._keep = [te, y, pp, kd_, gc, tp, cs, q, qd, tau, st, fr, wr]  # pointed into
         self.t0, self.t1, self.rtol, self.h = t0, t1, rtol, h
         self.first_step, self.max_step, self.max_steps = first_step, max_step, max_steps
         self.te = _data(te)
@@ -508,6 +629,10 @@ cdef class CompiledBatch:
         self.target = _data(<cnp.ndarray>cs[2])
         self.tq0 = _data(<cnp.ndarray>cs[3])
         self.tqf = _data(<cnp.ndarray>cs[4])
+        self.ff = _data(<cnp.ndarray>cs[5])
+        self.nframes = cnp.PyArray_SIZE(fr)
+        self.frames = <const int *>cnp.PyArray_DATA(fr)
+        self.wrenches = _data(wr)
         self.tTp = _data(tp)
         self.c_step = _row_step(tp)
         self.stats = <int64_t *>cnp.PyArray_DATA(st)
@@ -517,7 +642,7 @@ cdef class CompiledBatch:
         """Integrate runs start .. stop-1 without the GIL; False if stop() ended it early."""
         if not 0 <= start <= stop <= self.N:
             raise ValueError(f"runs {start}:{stop} are not within 0:{self.N}")
-        cdef double *y = <double *>malloc((self.m + 1) * 2 * NQ * sizeof(double))
+        cdef double *y = <double *>malloc((self.m + 1) * NY * sizeof(double))
         if y == NULL:
             raise MemoryError()
         cdef Py_ssize_t i
@@ -539,31 +664,32 @@ cdef class CompiledBatch:
         cdef Py_ssize_t c = i * self.c_step, r, k, m = self.m
         cdef const double *p = self.p + i * self.p_step * NP
         cdef double *q = self.q + i * m * NQ
-        cdef double *qd = self.qd + i * m * NQ
-        cdef double *tau = self.tau + i * m * NQ
+        cdef double *qd = self.qd + i * m * NV
+        cdef double *tau = self.tau + i * m * NV
         ctl.kind = self.kind[c]
         ctl.gravity_compensation = self.gc[c]
-        ctl.kp = self.kp + c * NQ
-        ctl.kd = self.kd + c * NQ
-        ctl.target = self.target + c * NQ
+        ctl.kp = self.kp + c * NV
+        ctl.kd = self.kd + c * NV
+        ctl.target = self.target + c * NV
         ctl.traj_q0 = self.tq0 + c * NQ
         ctl.traj_qf = self.tqf + c * NQ
         ctl.traj_Tp = self.tTp[c]
+        ctl.feedforward = self.ff + c * NV
+        ctl.nframes = self.nframes
+        ctl.frames = self.frames
+        ctl.wrenches = self.wrenches
         ctl.poll = _poll_flag
         ctl.poll_ctx = <void *>&self.stop_flag
         st.nfev = st.nsteps = st.naccepted = st.nrejected = 0
         cdef int status = rrr_simulate(self.code, &ctl, p, self.t0, self.t1,
-                                               self.y0 + i * self.y_step * 2 * NQ, self.rtol,
+                                               self.y0 + i * self.y_step * NY, self.rtol,
                                                self.at, self.first_step, self.max_step,
                                                self.max_steps, self.h, self.te, m, y, &st)
-        for r in range(m):
-            for k in range(NQ):
-                q[r * NQ + k] = y[r * 2 * NQ + k]
-                qd[r * NQ + k] = y[r * 2 * NQ + NQ + k]
+        _split_states(y, m, q, qd)
         if status == 0:
             rrr_control_torques(&ctl, p, m, self.te, y, tau)
         else:
-            for k in range(m * NQ):
+            for k in range(m * NV):
                 tau[k] = NAN
         cdef int64_t *s = self.stats + i * 5
         s[0] = status
