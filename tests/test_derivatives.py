@@ -445,6 +445,17 @@ def test_a_derivative_module_of_other_equations_is_refused():
     np.testing.assert_array_equal(fresh.coriolis_matrix(q, q), rrr.coriolis_matrix(q, q))
 
 
+def test_the_compiled_derivatives_of_a_floating_base_are_refused_clearly():
+    """q holds a quaternion there (nq > nv): not generated, said so (the build stops
+    before any C is written)."""
+    from gagen.codegen.derivatives import generate_derivatives
+
+    model = resolve_model(str(SHARED_URDF / "double_pendulum.urdf"), floating_base=True)
+    d = derive_derivatives(derive_equations(model))
+    with pytest.raises(NotImplementedError, match="floating base"):
+        generate_derivatives(d, "module", "key", "equations key")
+
+
 def test_derivative_sources_are_identical_across_hash_seeds(tmp_path):
     script = ("import sys, pathlib, gagen\n"
               "from gagen.build.builder import generate_sources\n"
