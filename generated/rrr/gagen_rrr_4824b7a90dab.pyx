@@ -34,6 +34,9 @@ cdef extern from "rrr.h" nogil:
     int rrr_frame_jacobian(const double *q, const double *p, int frame, double *J)
     int rrr_frame_velocity(const double *q, const double *qd, const double *p,
                                    int frame, double *v)
+    void rrr_regressor(const double *q, const double *qd, const double *qdd,
+                               const double *p, double *Y)
+    void rrr_regressor_parameters(const double *p, double *pi)
     int rrr_simulate(int method, const gagen_control *c, const double *p, double t0,
                              double t1, const double *y0, double rtol, const double *atol,
                              double first_step, double max_step, long max_steps, double h,
@@ -65,8 +68,8 @@ cdef extern from "integrator.h" nogil:
         GAGEN_METHOD_DOPRI5
         GAGEN_METHOD_RK4
 
-KEY = "dc0cea40eeaf74647a1d7228fcb9e843bbe43c0326190f7ce4fd7c4953d5f35f"
-MANIFEST_HEX = "7b22626f64696573223a205b5b2d312c20312c20305d2c205b302c20312c20315d2c205b312c20312c20325d5d2c20226672616d6573223a205b5b226c696e6b31222c20302c20226c696e6b225d2c205b227131222c20302c20226a6f696e74225d2c205b226c696e6b32222c20312c20226c696e6b225d2c205b227132222c20312c20226a6f696e74225d2c205b226c696e6b33222c20322c20226c696e6b225d2c205b227133222c20322c20226a6f696e74225d5d2c20226a6f696e7473223a205b7b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227131222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d2c207b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227132222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d2c207b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227133222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d5d2c20226e616d65223a2022727272222c2022706172616d6574657273223a205b5b2267222c20392e38315d2c205b224c31222c20302e345d2c205b224c32222c20302e345d2c205b224c33222c20302e345d2c205b226d31222c2036302e305d2c205b226d32222c2035302e305d2c205b226d33222c2034302e305d2c205b22493178222c20302e385d2c205b22493179222c20302e3037355d2c205b2249317a222c20302e385d2c205b22493278222c20302e363636363636363636363636363636365d2c205b22493279222c20302e303632355d2c205b2249327a222c20302e363636363636363636363636363636365d2c205b22493378222c20302e353333333333333333333333333333335d2c205b22493379222c20302e30355d2c205b2249337a222c20302e353333333333333333333333333333335d5d2c2022736f75726365223a20226275696c74696e3a727272227d"
+KEY = "4b9b1251aff946dc4bb7ad1e9e0b74875321cb5eec77ac3b606f56749d7cef56"
+MANIFEST_HEX = "7b22626f64696573223a205b5b2d312c20312c20305d2c205b302c20312c20315d2c205b312c20312c20325d5d2c20226672616d6573223a205b5b226c696e6b31222c20302c20226c696e6b225d2c205b227131222c20302c20226a6f696e74225d2c205b226c696e6b32222c20312c20226c696e6b225d2c205b227132222c20312c20226a6f696e74225d2c205b226c696e6b33222c20322c20226c696e6b225d2c205b227133222c20322c20226a6f696e74225d5d2c20226a6f696e7473223a205b7b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227131222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d2c207b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227132222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d2c207b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227133222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d5d2c20226d6f76696e675f626f64696573223a205b226c696e6b31222c20226c696e6b32222c20226c696e6b33225d2c20226e616d65223a2022727272222c2022706172616d6574657273223a205b5b2267222c20392e38315d2c205b224c31222c20302e345d2c205b224c32222c20302e345d2c205b224c33222c20302e345d2c205b226d31222c2036302e305d2c205b226d32222c2035302e305d2c205b226d33222c2034302e305d2c205b22493178222c20302e385d2c205b22493179222c20302e3037355d2c205b2249317a222c20302e385d2c205b22493278222c20302e363636363636363636363636363636365d2c205b22493279222c20302e303632355d2c205b2249327a222c20302e363636363636363636363636363636365d2c205b22493378222c20302e353333333333333333333333333333335d2c205b22493379222c20302e30355d2c205b2249337a222c20302e353333333333333333333333333333335d5d2c2022736f75726365223a20226275696c74696e3a727272227d"
 # The model's names are not in this file (it holds code, and identifiers only); gagen keeps
 # them with the model. The defaults are printed numbers, in the order of p.
 PARAMETER_DEFAULTS = (9.81, 0.4, 0.4, 0.4, 60.0, 50.0, 40.0, 0.8, 0.075, 0.8, 0.6666666666666666, 0.0625, 0.6666666666666666, 0.5333333333333333, 0.05, 0.5333333333333333, )
@@ -78,9 +81,11 @@ cdef enum:
     NB = 3
     NF = 6
     NP = 16
+    NREG = 39
 
 ctypedef int (*kernel3)(const double *, const double *, const double *, const double *,
                         double *) noexcept nogil
+ctypedef void (*kernel_p)(const double *, double *) noexcept nogil
 
 
 cdef int _forcing(const double *a, const double *b, const double *c, const double *p,
@@ -121,6 +126,12 @@ cdef int _mass(const double *a, const double *b, const double *c, const double *
 cdef int _placements(const double *a, const double *b, const double *c, const double *p,
                      double *out) noexcept nogil:
     rrr_placements(a, p, out)
+    return 0
+
+
+cdef int _regressor(const double *a, const double *b, const double *c, const double *p,
+                    double *out) noexcept nogil:
+    rrr_regressor(a, b, c, p, out)
     return 0
 
 
@@ -299,18 +310,22 @@ cdef class CompiledModel(_Evaluator):
         """Per body, its orientation (row-major), origin and joint axis in the world."""
         return self._run(_placements, 15 * NB, q, None, None, p, "q", None, None)
 
-    def frame_offsets(self, p=None):
-        """Per frame, its axes (row-major) and origin in its body's frame."""
+    cdef object _of_parameters(self, kernel_p kernel, Py_ssize_t size, object p):
+        """A kernel of the parameters alone, into a fresh array of `size`."""
         cdef const double *pp = self._defaults
         cdef cnp.ndarray pa
         if p is not None:
             pa = self._parameters(p)
             pp = <const double *>cnp.PyArray_DATA(pa)
         cdef cnp.npy_intp dims[1]
-        dims[0] = 12 * NF
+        dims[0] = size
         cdef cnp.ndarray out = cnp.PyArray_EMPTY(1, dims, cnp.NPY_DOUBLE, 0)
-        rrr_frame_offsets(pp, _data(out))
+        kernel(pp, _data(out))
         return out
+
+    def frame_offsets(self, p=None):
+        """Per frame, its axes (row-major) and origin in its body's frame."""
+        return self._of_parameters(rrr_frame_offsets, 12 * NF, p)
 
     def frame(self, int which, int frame, q, qd, p=None):
         """A frame's placement (which 0: R and origin, 12 values), Jacobian (1: 6 x NV) or
@@ -358,6 +373,17 @@ cdef class CompiledModel(_Evaluator):
         if cnp.PyArray_NDIM(<cnp.ndarray>out) == 1:
             return float(out[0]), float(out[1])
         return out[:, 0].copy(), out[:, 1].copy()
+
+    def regressor(self, q, qd, qdd, p=None):
+        """Y(q, qd, qdd), shape (n, P), or (N, n, P) for stacked states."""
+        out = self._run(_regressor, NV * NREG, q, qd, qdd, p, "q", "qd", "qdd")
+        if cnp.PyArray_NDIM(<cnp.ndarray>out) == 1:
+            return out.reshape(NV, NREG)
+        return out.reshape(-1, NV, NREG)
+
+    def regressor_parameters(self, p=None):
+        """pi, shape (P,): the dynamic parameters at p."""
+        return self._of_parameters(rrr_regressor_parameters, NREG, p)
 
 
 def _vector(x, Py_ssize_t size, str name):

@@ -67,17 +67,6 @@ DERIVATIVE_COPIED_FILES = ("gagen_math.h",)
 
 
 @dataclass
-class _Program:
-    """A straight-line program and its outputs, as CSEResult reads an Equations."""
-
-    intermediates: list[tuple[sp.Symbol, sp.Expr]]
-    named_outputs: dict[str, list[sp.Expr]]
-
-    def outputs(self) -> dict[str, list[sp.Expr]]:
-        return self.named_outputs
-
-
-@dataclass
 class DerivativeBlocks:
     """The code of the derivative module's kernels and the layout of S, the values the
     `fixed` stage passes on: dtau/dqd at S[0 .. n^2), then the interface of the others."""
@@ -89,8 +78,9 @@ class DerivativeBlocks:
     size: int  # doubles of S
 
 
-def derivative_program(deq: DerivativeEquations) -> _Program:
-    """The outputs of the derivative module and the definitions they need."""
+def derivative_program(deq: DerivativeEquations
+                       ) -> tuple[list[tuple[sp.Symbol, sp.Expr]], dict[str, list[sp.Expr]]]:
+    """The outputs of the derivative module (name -> list) and the definitions they need."""
     eqs, n = deq.equations, deq.n
     outputs = {
         "mass_matrix": [eqs.mass_matrix[r, s] for r in range(n) for s in range(r + 1)],
@@ -100,7 +90,7 @@ def derivative_program(deq: DerivativeEquations) -> _Program:
         "coriolis": list(deq.coriolis),
     }
     flat = [e for values in outputs.values() for e in values]
-    return _Program(needed_definitions(deq.intermediates, flat), outputs)
+    return needed_definitions(deq.intermediates, flat), outputs
 
 
 def _blocks(deq: DerivativeEquations, kernels: _Kernels) -> DerivativeBlocks:
@@ -152,9 +142,9 @@ def generate_derivatives(deq: DerivativeEquations, module_name: str, key: str,
             f"model '{eqs.model.name}': the derivatives of a floating base (q holds a "
             "quaternion) are not there yet; they are for models with one q entry per velocity")
     ident = c_identifier(eqs.model.name)
-    program = derivative_program(deq)
-    cse = CSEResult(program, eqs.derivation == "gibbs-appell" if config.cse is None
-                    else config.cse)
+    definitions, outputs = derivative_program(deq)
+    cse = CSEResult(eqs, eqs.derivation == "gibbs-appell" if config.cse is None
+                    else config.cse, definitions, outputs)
     printer = GagenCPrinter(_symbol_names(eqs, cse), list(eqs.coords.q), config.fast_trig)
     kernels = _Kernels(ident, cse, printer, config, arrays=DERIVATIVE_KERNEL_ARRAYS,
                        looped=DERIVATIVE_LOOPED_KERNELS)
