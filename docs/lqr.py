@@ -104,8 +104,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=FIGURE, help="the figure (PNG)")
     args = parser.parse_args(argv)
-    # the derivatives are in the lambdify backend; the compiled one gets them next
-    dyn = gagen.load("rrr", backend="lambdify")
+    dyn = gagen.load("rrr", derivatives=True)
     design = design_lqr(dyn)
     np.set_printoptions(precision=3, suppress=True)
     print("q* =", design.q_eq, "rad;  tau* = gravity(q*) =", design.tau_eq, "N m")

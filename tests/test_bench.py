@@ -216,7 +216,8 @@ def test_bench_smoke_run_writes_the_report(tmp_path, cache_dir, capsys):
     out = tmp_path / "bench"
     assert main(["bench", "--out", str(out), "--smoke", "--cache-dir", str(cache_dir)]) == 0
     progress = capsys.readouterr().out
-    for section in ("per call", "batched", "simulation", "throughput", "scaling", "report"):
+    for section in ("per call", "batched", "simulation", "throughput", "scaling", "derivatives",
+                    "report"):
         assert f"] {section}:" in progress, section
     text = (out / "report.md").read_text()
     assert f"| CPU | {cpu_model()}" in text
@@ -238,5 +239,13 @@ def test_bench_smoke_run_writes_the_report(tmp_path, cache_dir, capsys):
     assert all(r["sims_per_s"] > 0 and r["runs"] == 8 for r in tp)
     assert "## Throughput: many simulations at once" in text
     assert [r["model"] for r in results["scaling"]["rows"]] == ["chain:2"]
+    dv = results["derivatives"]
+    assert {(r["quantity"], r["implementation"]) for r in dv["rows"]} >= {
+        ("forward dynamics derivatives", "gagen compiled"),
+        ("forward dynamics derivatives", "gagen central differences"),
+        ("inverse dynamics derivatives", "gagen compiled"), ("Coriolis matrix", "gagen compiled")}
+    assert [(r["model"], r["module"]) for r in dv["builds"]] == [("rrr", "main"),
+                                                                ("rrr", "derivatives")]
+    assert "## The derivatives per call" in text
     for png in ("percall.png", "batched.png", "simulation.png", "scaling.png"):
         assert (out / png).exists()

@@ -46,6 +46,17 @@ def test_info_lists_every_method_of_the_api(capsys):
     assert "linearize(q, qd, tau) *" in out and "(6, 6), (6, 3)" in out
 
 
+def test_build_with_derivatives_builds_and_reports_both_modules(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["build", "chain:2", "--out", str(out), "--derivatives"]) == 0
+    shown = capsys.readouterr()
+    assert "building the derivatives of 'chain2'" in shown.err
+    reports = [line for line in shown.out.splitlines() if "operations before CSE" in line]
+    assert len(reports) == 2 and "the derivatives of chain2: 2 coordinates" in reports[1]
+    assert any(out.glob("chain2.h")) and any((out / "derivatives").glob("*_derivatives.h"))
+    assert len(list(out.glob("gagen_*.so"))) == len(list((out / "derivatives").glob("*.so"))) == 1
+
+
 def test_unknown_model_is_a_clean_error(capsys):
     assert main(["info", "no-such-robot.txt"]) == 2
     assert "not a built-in model" in capsys.readouterr().err

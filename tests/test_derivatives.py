@@ -1,11 +1,16 @@
-"""The derivatives of the dynamics (gagen.symbolic.derivatives, the lambdify backend):
-against Pinocchio's analytical derivatives and Coriolis matrix, against central differences
-of gagen's own functions, the Coriolis matrix's defining properties, and the API's shapes,
-checks and fresh memory."""
+"""The derivatives of the dynamics (gagen.symbolic.derivatives), in both backends (the
+compiled one: the derivative module of codegen/derivatives.py): against Pinocchio's
+analytical derivatives and Coriolis matrix, against central differences of gagen's own
+functions, the Coriolis matrix's defining properties, the API's shapes, checks and fresh
+memory, the derivative module's build on first use and its C used standalone."""
 
 from __future__ import annotations
 
 import functools
+import hashlib
+import json
+import os
+import shutil
 import subprocess
 import sys
 
@@ -34,6 +39,7 @@ CASES = {
     "rrr-recursive": ("rrr", "recursive", True),
     **{f"random{s}": (f"random:{s}", "auto", True) for s in RANDOM_TREE_SEEDS},
     "random7-recursive": ("random:7", "recursive", True),
+    "chain5-recursive": ("chain:5", "recursive", True),
     "ur5": (str(SHARED_URDF / "ur5_robot.urdf"), "auto", False),
     "panda": (str(SHARED_URDF / "panda.urdf"), "auto", False),
 }
@@ -49,6 +55,33 @@ def _model(name: str):
 def lambdify_dynamics(case: str) -> LambdifyDynamics:
     name, derivation, _ = CASES[case]
     return LambdifyDynamics(derive_equations(_model(name), derivation))
+
+
+@functools.cache
+def compiled_dynamics(case: str):
+    """Both compiled modules of a case (the derivative module built up front)."""
+    name, derivation, _ = CASES[case]
+    model = _model(name) if name.startswith("random:") else name
+    return gagen.load(model, derivation=derivation, derivatives=True)
+
+
+def dynamics(case: str, backend: str):
+    return lambdify_dynamics(case) if backend == "lambdify" else compiled_dynamics(case)
+
+
+# The compiled cases of the default run; the others build two modules each (the Panda's
+# and the UR5's take half a minute to a minute on a busy 2-core machine): slow.
+COMPILED_DEFAULT = ("rrr", "rrr-recursive", "random7", "chain5-recursive")
+
+
+def backend_cases(cases, compiled=COMPILED_DEFAULT):
+    """(case, backend) parameters: every case on lambdify, and compiled (slow unless in
+    `compiled`)."""
+    params = [pytest.param(case, "lambdify", id=f"{case}-lambdify") for case in cases]
+    params += [pytest.param(case, "compiled", id=f"{case}-compiled",
+                            marks=() if case in compiled else pytest.mark.slow)
+               for case in cases]
+    return params
 
 
 def random_state(dyn, rng, vary: bool = True):
@@ -84,12 +117,12 @@ def test_the_random_trees_have_every_joint_type():
     assert types == {"revolute", "continuous", "prismatic", "fixed"}
 
 
-@pytest.mark.parametrize("case", list(CASES))
-def test_matches_pinocchio(case):
+@pytest.mark.parametrize("case, backend", backend_cases(CASES))
+def test_matches_pinocchio(case, backend):
     pin = pytest.importorskip("pinocchio")
     from gagen.reference.pinocchio import joint_forces, pinocchio_model, to_pinocchio
 
-    dyn = lambdify_dynamics(case)
+    dyn = dynamics(case, backend)
     rng = np.random.default_rng(11)
     for _ in range(3):
         q, qd, qdd, tau, p = random_state(dyn, rng, vary=CASES[case][2])
@@ -114,6 +147,9 @@ def test_matches_pinocchio(case):
         assert_close(dqdd_dqd, gagen_order(aba[1]))
         assert_close(dqdd_dtau, gagen_order(aba[2]))
         assert_close(dyn.coriolis_matrix(q, qd, p), gagen_order(coriolis))
+        A, B = dyn.linearize(q, qd, tau, p)
+        assert_close(A[dyn.n:], np.hstack([gagen_order(aba[0]), gagen_order(aba[1])]))
+        assert_close(B[dyn.n:], gagen_order(aba[2]))
 
 
 # --- against central differences of gagen's own functions -------------------------------
@@ -128,9 +164,10 @@ def central_difference(f, x, h=1e-6):
     return np.stack(columns, axis=-1)
 
 
-@pytest.mark.parametrize("case", ["rrr", "rrr-recursive", "random4", "random7"])
-def test_matches_central_differences(case):
-    dyn = lambdify_dynamics(case)
+@pytest.mark.parametrize("case, backend", backend_cases(
+    ["rrr", "rrr-recursive", "random4", "random7", "chain5-recursive"]))
+def test_matches_central_differences(case, backend):
+    dyn = dynamics(case, backend)
     rng = np.random.default_rng(5)
     n = dyn.n
     q, qd, qdd, tau, p = random_state(dyn, rng)
@@ -161,12 +198,13 @@ def test_matches_central_differences(case):
 
 # --- the Coriolis matrix -------------------------------------------------------------
 
-@pytest.mark.parametrize("case", ["rrr", "rrr-recursive", "random1", "random12", "panda"])
-def test_coriolis_matrix_properties(case):
+@pytest.mark.parametrize("case, backend", backend_cases(
+    ["rrr", "rrr-recursive", "random1", "random12", "chain5-recursive", "panda"]))
+def test_coriolis_matrix_properties(case, backend):
     """C qd = the velocity terms; Mdot - 2C is skew-symmetric, with Mdot from central
     differences along qd; and dtau/dqd = 2C (the symmetry of the Christoffel symbols), plus
     the joints' damping."""
-    dyn = lambdify_dynamics(case)
+    dyn = dynamics(case, backend)
     rng = np.random.default_rng(8)
     for _ in range(2):
         q, qd, qdd, _, p = random_state(dyn, rng, vary=CASES[case][2])
@@ -245,8 +283,12 @@ def _all_methods(dyn, q, qd, x, p=None):
             dyn.coriolis_matrix(q, qd, p), *dyn.linearize(q, qd, x, p)]
 
 
-def test_shapes_and_stacked_inputs_match_single_calls():
-    dyn = lambdify_dynamics("rrr")
+BACKENDS = ("lambdify", "compiled")
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_shapes_and_stacked_inputs_match_single_calls(backend):
+    dyn = dynamics("rrr", backend)
     n = dyn.n
     rng = np.random.default_rng(2)
     Q, QD, X = rng.normal(size=(3, 5, n))
@@ -263,8 +305,9 @@ def test_shapes_and_stacked_inputs_match_single_calls():
         np.testing.assert_array_equal(s, m)
 
 
-def test_every_call_returns_fresh_memory():
-    dyn = lambdify_dynamics("rrr")
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_every_call_returns_fresh_memory(backend):
+    dyn = dynamics("rrr", backend)
     q, qd, x = np.full((3, 3), 0.3)
     first = _all_methods(dyn, q, qd, x)
     second = _all_methods(dyn, q, qd, x)
@@ -275,8 +318,9 @@ def test_every_call_returns_fresh_memory():
     assert not np.shares_memory(*dyn.inverse_dynamics_derivatives(q, qd, x))
 
 
-def test_parameters_and_bad_inputs():
-    dyn = lambdify_dynamics("rrr")
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_parameters_and_bad_inputs(backend):
+    dyn = dynamics("rrr", backend)
     q, qd, x = np.full((3, 3), 0.3)
     heavy = dyn.coriolis_matrix(q, qd, p={"m3": 80.0})
     assert not np.allclose(heavy, dyn.coriolis_matrix(q, qd))
@@ -301,11 +345,204 @@ def test_parameters_and_bad_inputs():
         dyn.linearize([0.1, np.nan, 0.3], qd, x)
 
 
-def test_compiled_backend_says_the_derivatives_are_coming():
-    dyn = gagen.load("rrr")  # the shipped module: no build
-    q = np.zeros(3)
-    for call in (lambda: dyn.inverse_dynamics_derivatives(q, q, q),
-                 lambda: dyn.forward_dynamics_derivatives(q, q, q),
-                 lambda: dyn.coriolis_matrix(q, q), lambda: dyn.linearize(q, q, q)):
-        with pytest.raises(NotImplementedError, match='backend="lambdify"'):
-            call()
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_singular_row_of_stacked_states_is_named(backend):
+    dyn = dynamics("rrr", backend)
+    massless = dyn.parameter_vector({name: 0.0 for name in dyn.parameters if name[0] in "mI"})
+    q = np.zeros((4, 3))
+    q[2, 1] = np.nan
+    with pytest.raises(NonFiniteStateError, match="row 2" if backend == "compiled" else None):
+        dyn.forward_dynamics_derivatives(q, q, q)
+    with pytest.raises(SingularMassMatrixError):
+        dyn.linearize(np.zeros((4, 3)), q, q, p=massless)
+    # the other methods do not factor M: they compute at any parameters
+    assert np.isfinite(dyn.coriolis_matrix(np.ones(3), np.ones(3), p=massless)).all()
+
+
+def test_stacked_compiled_calls_run_the_c_loop_with_fresh_outputs():
+    """Large stacks (the GIL-free loop) match the single calls row by row; a single state
+    broadcasts against the stacked ones."""
+    dyn = compiled_dynamics("chain5-recursive")
+    rng = np.random.default_rng(3)
+    Q, QD, X = rng.normal(size=(3, 200, dyn.n))
+    stacked = _all_methods(dyn, Q, QD, X)
+    for k in (0, 117, 199):
+        for s, one in zip(stacked, _all_methods(dyn, Q[k], QD[k], X[k])):
+            np.testing.assert_array_equal(s[k], one)
+    for s, m in zip(stacked, _all_methods(dyn, Q, QD[5], X)):
+        assert s.shape == m.shape
+    np.testing.assert_array_equal(_all_methods(dyn, Q, QD[5], X)[0][9],
+                                  _all_methods(dyn, Q[9], QD[5], X[9])[0])
+
+
+# --- the derivative module: built on first use, found again without SymPy ----------------
+
+def _entries(cache) -> list[str]:
+    """The compiled modules of a cache folder (its entries, not the index)."""
+    return sorted(p.name.rsplit("-", 1)[0] for p in cache.iterdir()
+                  if p.is_dir() and p.name.startswith("gagen_"))
+
+
+FIRST_USE = """
+import json, sys
+import numpy as np
+import gagen
+dyn = gagen.load(sys.argv[1], cache_dir=sys.argv[2], derivatives=sys.argv[3] == "up-front")
+loaded = "sympy" in sys.modules
+q = np.full(dyn.n, 0.2)
+values = [a.tolist() for a in dyn.forward_dynamics_derivatives(q, q, q)]
+print(json.dumps({"sympy after load": loaded, "sympy after the derivatives": "sympy" in
+                  sys.modules, "values": values}))
+"""
+
+
+def _first_use(model: str, cache, mode: str) -> dict:
+    proc = subprocess.run([sys.executable, "-c", FIRST_USE, model, str(cache), mode],
+                          capture_output=True, text=True, timeout=900, check=False)
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout.splitlines()[-1])
+
+
+def test_the_derivative_module_is_built_on_first_use_and_found_without_sympy(tmp_path):
+    model = "chain:2"
+    dyn = gagen.load(model, cache_dir=tmp_path)
+    assert _entries(tmp_path) == [f"{dyn.module.__name__}"]  # a plain load: one module
+    assert dyn.derivative_module is None
+    q = np.full(2, 0.2)
+    C = dyn.coriolis_matrix(q, q)  # the first derivative call builds the second module
+    assert _entries(tmp_path) == sorted([dyn.module.__name__, dyn.derivative_module.__name__])
+    assert dyn.derivative_module.__name__ == dyn.module.__name__ + "_derivatives"
+    np.testing.assert_array_equal(dyn.coriolis_matrix(q, q), C)
+    # a fresh process finds both modules by the input's key: no SymPy, no build
+    again = _first_use(model, tmp_path, "on-first-use")
+    assert again["sympy after load"] is False and again["sympy after the derivatives"] is False
+    assert len(_entries(tmp_path)) == 2
+    up_front = _first_use(model, tmp_path, "up-front")
+    assert up_front["sympy after load"] is False
+    np.testing.assert_array_equal(up_front["values"], again["values"])
+    want = dyn.forward_dynamics_derivatives(q, q, q)
+    np.testing.assert_array_equal(np.array(again["values"]), np.array(want))
+
+
+def test_load_with_derivatives_builds_both_modules_up_front(tmp_path):
+    dyn = gagen.load("chain:2", cache_dir=tmp_path, derivatives=True)
+    assert dyn.derivative_module is not None
+    assert len(_entries(tmp_path)) == 2
+    # bound to the instance: the C methods themselves, no Python frame of gagen's
+    for name in ("inverse_dynamics_derivatives", "forward_dynamics_derivatives",
+                 "coriolis_matrix", "linearize"):
+        assert type(getattr(dyn, name).__self__).__name__ == "CompiledDerivatives"
+
+
+def test_a_derivative_module_of_other_equations_is_refused():
+    rrr = compiled_dynamics("rrr")
+    other = compiled_dynamics("rrr-recursive")  # the same model, the other derivation
+    fresh = gagen.load("rrr")
+    with pytest.raises(gagen.BuildError, match="not built from the equations"):
+        fresh.bind_derivatives(other.derivative_module)
+    fresh.bind_derivatives(rrr.derivative_module)
+    q = np.full(3, 0.4)
+    np.testing.assert_array_equal(fresh.coriolis_matrix(q, q), rrr.coriolis_matrix(q, q))
+
+
+def test_the_compiled_derivatives_of_a_floating_base_are_refused_clearly():
+    """q holds a quaternion there (nq > nv): not generated, said so (the build stops
+    before any C is written)."""
+    from gagen.codegen.derivatives import generate_derivatives
+
+    model = resolve_model(str(SHARED_URDF / "double_pendulum.urdf"), floating_base=True)
+    d = derive_derivatives(derive_equations(model))
+    with pytest.raises(NotImplementedError, match="floating base"):
+        generate_derivatives(d, "module", "key", "equations key")
+
+
+def test_derivative_sources_are_identical_across_hash_seeds(tmp_path):
+    script = ("import sys, pathlib, gagen\n"
+              "from gagen.build.builder import generate_sources\n"
+              "generate_sources(gagen.resolve_model('chain:3'), pathlib.Path(sys.argv[1]),"
+              " derivatives=True)\n")
+    digests = []
+    for seed in ("1", "2"):
+        folder = tmp_path / seed
+        subprocess.run([sys.executable, "-c", script, str(folder)], check=True,
+                       env={**os.environ, "PYTHONHASHSEED": seed})
+        digests.append({p.name: hashlib.sha256(p.read_bytes()).hexdigest()
+                        for p in sorted(folder.iterdir())})
+    assert digests[0] == digests[1]
+    assert {"derivatives.c", "gagen_math.h"} <= set(digests[0])
+    assert any(name.endswith("_derivatives.h") for name in digests[0])
+
+
+# --- the generated C on its own ------------------------------------------------------
+
+STANDALONE = r"""
+#include <stdio.h>
+#include "rrr_derivatives.h"
+
+static void print(const double *x, int count)
+{
+    int k;
+    for (k = 0; k < count; ++k)
+        printf("%%.17g\n", x[k]);
+}
+
+int main(void)
+{
+    const double p[RRR_NP] = {%(params)s};
+    const double q[3] = {0.3, -0.7, 1.1}, qd[3] = {0.5, -1.5, 2.0}, x[3] = {1.0, 20.0, -5.0};
+    double a[9], b[9], c[9], A[36], B[18], massless[RRR_NP];
+    int k;
+    rrr_inverse_dynamics_derivatives(q, qd, x, p, a, b);
+    print(a, 9);
+    print(b, 9);
+    rrr_coriolis_matrix(q, qd, p, c);
+    print(c, 9);
+    printf("%%d\n", rrr_forward_dynamics_derivatives(q, qd, x, p, a, b, c));
+    print(a, 9);
+    print(b, 9);
+    print(c, 9);
+    printf("%%d\n", rrr_linearize(q, qd, x, p, A, B));
+    print(A, 36);
+    print(B, 18);
+    for (k = 0; k < RRR_NP; ++k)
+        massless[k] = k == 0 ? p[0] : 0.0;  /* g, then lengths, masses, inertias */
+    for (k = 1; k < 4; ++k)
+        massless[k] = p[k];
+    printf("%%d\n", rrr_forward_dynamics_derivatives(q, qd, x, massless, a, b, c));
+    return 0;
+}
+"""
+
+
+@pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed")
+def test_standalone_c_program_computes_the_same_numbers(tmp_path):
+    from gagen.build.builder import generate_sources
+
+    generate_sources(gagen.resolve_model("rrr"), tmp_path, derivatives=True)
+    ref = lambdify_dynamics("rrr")
+    assert list(ref.parameters)[:4] == ["g", "L1", "L2", "L3"]
+    params = ", ".join(repr(v) for v in ref.parameters.values())
+    (tmp_path / "main.c").write_text(STANDALONE % {"params": params})
+    sources = sorted(p.name for p in tmp_path.glob("*.c") if not p.name.startswith("gagen_"))
+    exe = tmp_path / "derivatives_demo"
+    subprocess.run(["gcc", "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic",
+                    "-o", str(exe), *sources, "-lm"], cwd=tmp_path, check=True)
+    values = np.array(subprocess.run([str(exe)], capture_output=True, text=True,
+                                     check=True).stdout.split(), dtype=float)
+    q, qd, x = np.array([0.3, -0.7, 1.1]), np.array([0.5, -1.5, 2.0]), np.array([1.0, 20, -5])
+    want = [*ref.inverse_dynamics_derivatives(q, qd, x), ref.coriolis_matrix(q, qd), [0],
+            *ref.forward_dynamics_derivatives(q, qd, x), [0], *ref.linearize(q, qd, x),
+            [1]]  # RRR_ERR_NOT_POSITIVE_DEFINITE without masses
+    np.testing.assert_allclose(values, np.concatenate([np.ravel(w) for w in want]),
+                               rtol=1e-12, atol=1e-12)
+    # no global or static data in any object
+    for source in sources:
+        if source == "main.c":
+            continue
+        obj = tmp_path / f"{source}.o"
+        subprocess.run(["gcc", "-std=c99", "-O2", "-c", source, "-o", str(obj)],
+                       cwd=tmp_path, check=True)
+        symbols = subprocess.run(["nm", str(obj)], capture_output=True, text=True,
+                                 check=True).stdout.split("\n")
+        data = [s for s in symbols if len(s.split()) == 3 and s.split()[1] in "BDdbCG"]
+        assert data == [], f"{source} defines global or static data: {data}"

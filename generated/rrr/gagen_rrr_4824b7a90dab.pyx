@@ -68,7 +68,7 @@ cdef extern from "integrator.h" nogil:
         GAGEN_METHOD_DOPRI5
         GAGEN_METHOD_RK4
 
-KEY = "5cda5fc6f2706d822f6b26303dc1932a55cc02b56f043be4e6938f377c959d39"
+KEY = "4b9b1251aff946dc4bb7ad1e9e0b74875321cb5eec77ac3b606f56749d7cef56"
 MANIFEST_HEX = "7b22626f64696573223a205b5b2d312c20312c20305d2c205b302c20312c20315d2c205b312c20312c20325d5d2c20226672616d6573223a205b5b226c696e6b31222c20302c20226c696e6b225d2c205b227131222c20302c20226a6f696e74225d2c205b226c696e6b32222c20312c20226c696e6b225d2c205b227132222c20312c20226a6f696e74225d2c205b226c696e6b33222c20322c20226c696e6b225d2c205b227133222c20322c20226a6f696e74225d5d2c20226a6f696e7473223a205b7b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227131222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d2c207b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227132222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d2c207b226566666f7274223a206e756c6c2c20226c6f776572223a206e756c6c2c20226e616d65223a20227133222c202274797065223a20227265766f6c757465222c20227570706572223a206e756c6c2c202276656c6f63697479223a206e756c6c7d5d2c20226d6f76696e675f626f64696573223a205b226c696e6b31222c20226c696e6b32222c20226c696e6b33225d2c20226e616d65223a2022727272222c2022706172616d6574657273223a205b5b2267222c20392e38315d2c205b224c31222c20302e345d2c205b224c32222c20302e345d2c205b224c33222c20302e345d2c205b226d31222c2036302e305d2c205b226d32222c2035302e305d2c205b226d33222c2034302e305d2c205b22493178222c20302e385d2c205b22493179222c20302e3037355d2c205b2249317a222c20302e385d2c205b22493278222c20302e363636363636363636363636363636365d2c205b22493279222c20302e303632355d2c205b2249327a222c20302e363636363636363636363636363636365d2c205b22493378222c20302e353333333333333333333333333333335d2c205b22493379222c20302e30355d2c205b2249337a222c20302e353333333333333333333333333333335d5d2c2022736f75726365223a20226275696c74696e3a727272227d"
 # The model's names are not in this file (it holds code, and identifiers only); gagen keeps
 # them with the model. The defaults are printed numbers, in the order of p.
@@ -180,31 +180,25 @@ cdef inline double *_data(cnp.ndarray a) noexcept:
     return <double *>cnp.PyArray_DATA(a)
 
 
-cdef inline double *_data_or_null(object a):
-    return NULL if a is None else <double *>cnp.PyArray_DATA(<cnp.ndarray>a)
-
-
 cdef inline Py_ssize_t _step(cnp.ndarray a) noexcept:
     return cnp.PyArray_DIM(a, 1) if cnp.PyArray_NDIM(a) == 2 else 0
 
 
-cdef class CompiledModel:
-    """The compiled kernels. gagen.runtime.compiled.CompiledDynamics binds these methods
-    (their documentation is gagen.runtime.dynamics.Dynamics's); parameter_vector turns the
-    p= forms other than a float64 array into one (None, a dict of overrides, a list)."""
+cdef class _Evaluator:
+    """What every class of kernels holds: the default parameters, and parameter_vector,
+    which turns the p= forms other than a float64 array into one (None, a dict of
+    overrides, a list)."""
 
     cdef double _defaults[16]
     cdef readonly object parameter_vector
-    cdef readonly object external_forces
 
     def __cinit__(self):
         cdef int k
         for k in range(NP):
             self._defaults[k] = PARAMETER_DEFAULTS[k]
 
-    def __init__(self, parameter_vector, external_forces=None):
+    def __init__(self, parameter_vector):
         self.parameter_vector = parameter_vector
-        self.external_forces = external_forces
 
     cdef cnp.ndarray _parameters(self, object p):
         if type(p) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>p) == cnp.NPY_DOUBLE \
@@ -213,6 +207,34 @@ cdef class CompiledModel:
                 and _all_finite(<const double *>cnp.PyArray_DATA(<cnp.ndarray>p), NP):
             return <cnp.ndarray>p
         return _converted(self.parameter_vector(p), "p")
+
+
+def _raise_not_positive_definite(row, status=1):
+    where = "" if row < 0 else f" (stacked input, row {row})"
+    if status == RRR_ERR_NONFINITE:
+        raise NonFiniteStateError(
+            f"the mass matrix of model 'rrr' is NaN or inf at this state{where}: "
+            "q holds NaN or inf")
+    raise SingularMassMatrixError(
+        f"the mass matrix of model 'rrr' is singular or not positive definite at this "
+        f"state{where}; check the state for NaN or inf and the parameters for zero or "
+        "negative masses and inertias")
+
+
+cdef inline double *_data_or_null(object a):
+    return NULL if a is None else <double *>cnp.PyArray_DATA(<cnp.ndarray>a)
+
+
+cdef class CompiledModel(_Evaluator):
+    """The compiled kernels. gagen.runtime.compiled.CompiledDynamics binds these methods
+    (their documentation is gagen.runtime.dynamics.Dynamics's); parameter_vector turns the
+    p= forms other than a float64 array into one (None, a dict of overrides, a list)."""
+
+    cdef readonly object external_forces
+
+    def __init__(self, parameter_vector, external_forces=None):
+        self.parameter_vector = parameter_vector
+        self.external_forces = external_forces
 
     cdef object _run(self, kernel3 kernel, int nout, object x, object y, object z,
                      object p, str nx, str ny, str nz):
@@ -720,15 +742,3 @@ cdef int _poll_signals(void *ctx) noexcept nogil:
             (<list>ctx).append(exc)
             return 1
     return 0
-
-
-def _raise_not_positive_definite(row, status=1):
-    where = "" if row < 0 else f" (stacked input, row {row})"
-    if status == RRR_ERR_NONFINITE:
-        raise NonFiniteStateError(
-            f"the mass matrix of model 'rrr' is NaN or inf at this state{where}: "
-            "q holds NaN or inf")
-    raise SingularMassMatrixError(
-        f"the mass matrix of model 'rrr' is singular or not positive definite at this "
-        f"state{where}; check the state for NaN or inf and the parameters for zero or "
-        "negative masses and inertias")

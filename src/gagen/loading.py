@@ -11,7 +11,8 @@ import os
 from pathlib import Path
 
 BACKENDS = ("compiled", "lambdify")
-_COMPILED_OPTIONS = ("cache_dir", "fast_math", "verbose", "portable", "derivation")
+_COMPILED_OPTIONS = ("cache_dir", "fast_math", "verbose", "portable", "derivation",
+                     "derivatives")
 
 
 def load(model="rrr", backend: str = "compiled", strict: bool = False,
@@ -27,14 +28,18 @@ def load(model="rrr", backend: str = "compiled", strict: bool = False,
     and `Dynamics.coordinates`). `backend` is "compiled" (generated C through
     Cython, built on first use and cached) or "lambdify" (SymPy's lambdify, no compiler).
     Options of the compiled backend: `cache_dir`, `fast_math`, `verbose` (show the build's
-    progress), `portable` (one version of the kernels for any CPU, no FMA clone). Both
+    progress), `portable` (one version of the kernels for any CPU, no FMA clone),
+    `derivatives` (build the derivative module now rather than on the first call of a
+    derivative method: it is a second module, so the default build stays as fast). Both
     backends take `derivation`: "auto" (default: the paper's Gibbs-Appell form up to 5
     coordinates, the recursive Newton-Euler/CRBA/articulated-body form from 6 on, by
     measurement: gagen.symbolic.derivation), "gibbs-appell" or "recursive"; they give the
     same equations.
 
     Returns a `gagen.runtime.dynamics.Dynamics`: `mass_matrix`, `forcing`,
-    `forward_dynamics`, `inverse_dynamics`, `gravity`, `energy`, and the model's names.
+    `forward_dynamics`, `inverse_dynamics`, `gravity`, `energy`, the derivatives
+    (`inverse_dynamics_derivatives`, `forward_dynamics_derivatives`, `coriolis_matrix`,
+    `linearize`), and the model's names.
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend '{backend}' (expected one of {', '.join(BACKENDS)})")
@@ -62,10 +67,21 @@ def _load_lambdify(model, derivation: str, strict: bool, floating_base: bool):
 
 def _load_compiled(model, cache_dir=None, fast_math: bool = False, verbose=None,
                    portable: bool = False, derivation: str = "auto", strict: bool = False,
-                   floating_base: bool = False):
+                   floating_base: bool = False, derivatives: bool = False):
+    dyn = _compiled_dynamics(model, cache_dir, fast_math, verbose, portable, derivation, strict,
+                             floating_base)
+    if derivatives:
+        dyn.load_derivatives()
+    return dyn
+
+
+def _compiled_dynamics(model, cache_dir, fast_math, verbose, portable, derivation, strict,
+                       floating_base):
     from .build import cache
 
     digest = None
+    build_options = {"cache_dir": cache_dir, "fast_math": fast_math, "verbose": verbose,
+                     "portable": portable, "derivation": derivation}
     if isinstance(model, (str, os.PathLike)):
         # strict is in the key: a model accepted with a warning must not skip a strict check
         options = [*cache.compile_flags(fast_math, portable), f"derivation={derivation}",
@@ -76,11 +92,33 @@ def _load_compiled(model, cache_dir=None, fast_math: bool = False, verbose=None,
         if module is not None:
             from .runtime.compiled import CompiledDynamics
 
-            return CompiledDynamics(module, (model, floating_base))
+            return CompiledDynamics(module, (model, floating_base),
+                                    derivatives=_DerivativeModule(digest, build_options))
     from .build.builder import load_compiled
     from .model.resolve import resolve_model
 
-    return load_compiled(resolve_model(model, strict, floating_base), cache_dir=cache_dir,
-                         fast_math=fast_math, verbose=verbose, portable=portable,
+    return load_compiled(resolve_model(model, strict, floating_base),
                          model_ref=(model, floating_base), input_digest=digest,
-                         derivation=derivation)
+                         derivatives=_DerivativeModule(digest, build_options), **build_options)
+
+
+class _DerivativeModule:
+    """Finds or builds the derivative module of a dynamics object loaded from what the user
+    named: by the input's key in the cache's index first (no SymPy), else from the model."""
+
+    def __init__(self, digest: str | None, build_options: dict):
+        self.digest, self.build_options = digest, build_options
+
+    def __call__(self, dyn):
+        from .build import cache
+
+        key = cache.derivatives_input_key(self.digest) if self.digest else None
+        if key is not None:
+            cache_dir = self.build_options["cache_dir"]
+            folder = Path(cache_dir) if cache_dir else cache.default_cache_dir()
+            module = cache.index_lookup(folder, key)
+            if module is not None:
+                return module
+        from .build.builder import load_derivative_module
+
+        return load_derivative_module(dyn.model, input_digest=key, **self.build_options)

@@ -126,6 +126,10 @@ def _build_arguments(p: argparse.ArgumentParser) -> None:
                    help="how the equations are derived: the paper's Gibbs-Appell form, or the "
                    "recursive Newton-Euler/CRBA form that builds big robots in seconds "
                    "(default auto: Gibbs-Appell up to 8 coordinates, recursive from 9)")
+    p.add_argument("--derivatives", action="store_true",
+                   help="also build the derivative module (inverse and forward dynamics "
+                   "derivatives, Coriolis matrix, linearize; otherwise built on their first "
+                   "use), into DIR/derivatives with --out")
 
 
 def _info_arguments(p: argparse.ArgumentParser) -> None:
@@ -277,13 +281,22 @@ def build_command(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     path, report = build(model, out=out, cache_dir=args.cache_dir, fast_math=args.fast_math,
                          derivation=args.derivation)
-    total = time.perf_counter() - start
-    if report.cached:
-        print(f"gagen: '{model.name}' is up to date in the cache")
-    print(f"gagen: {model.name}: {model.dof} coordinates, {report.ops_before_cse} operations "
-          f"before CSE, {report.ops_after_cse} after; total {total:.2f} s")
-    print(f"gagen: module {path}")
+    _print_build(model, "", path, report, time.perf_counter() - start)
+    if args.derivatives:
+        start = time.perf_counter()
+        path, report = build(model, out=out / "derivatives" if out else None,
+                             cache_dir=args.cache_dir, fast_math=args.fast_math,
+                             derivation=args.derivation, derivatives=True)
+        _print_build(model, "the derivatives of ", path, report, time.perf_counter() - start)
     return 0
+
+
+def _print_build(model, what: str, path: Path, report, total: float) -> None:
+    if report.cached:
+        print(f"gagen: {what}'{model.name}' is up to date in the cache")
+    print(f"gagen: {what}{model.name}: {model.dof} coordinates, {report.ops_before_cse} "
+          f"operations before CSE, {report.ops_after_cse} after; total {total:.2f} s")
+    print(f"gagen: module {path}")
 
 
 def info_command(args: argparse.Namespace) -> int:
@@ -310,7 +323,7 @@ def info_command(args: argparse.Namespace) -> int:
 
 
 # (call, what it returns); {n} and {m} (= 2n) become the model's sizes. The starred ones
-# are in the lambdify backend only, until the compiled derivative kernels land.
+# are in the compiled backend's second module, built on their first use.
 _METHODS = (
     ("mass_matrix(q)", "M: ({n}, {n})"),
     ("forcing(q, qd, tau)", "F with M qdd = F: ({n},)"),
@@ -345,7 +358,9 @@ def _print_methods(n: int, nq: int, P: int) -> None:
     print("methods      dyn = gagen.load(MODEL); stacked (N, ...) inputs give stacked outputs")
     for call, returns in _METHODS:
         print(f"  {call:<44} {returns.format(n=n, m=2 * n, nq=nq, P=P)}")
-    print('  * backend="lambdify" for now; the compiled backend gets them in the next step')
+    print("  * compiled: a second module, built on first use; gagen.load(MODEL, "
+          "derivatives=True) or\n    python -m gagen build MODEL --derivatives builds it up "
+          "front")
 
 
 def simulate_command(args: argparse.Namespace) -> int:

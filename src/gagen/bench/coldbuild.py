@@ -1,8 +1,9 @@
 """A cold build in a fresh process, measured from outside: wall time, stage times and the
 peak memory of the whole process tree (Python, Cython and the compilers running at once).
 
-`python -m gagen.bench.coldbuild MODEL CACHE_DIR` builds one model into a cache folder
-and prints one JSON line: the build report (stages, operation counts, module path). The
+`python -m gagen.bench.coldbuild MODEL CACHE_DIR [--derivatives]` builds one model (or its
+derivative module) into a cache folder and prints one JSON line: the build report (stages,
+operation counts, module path). The
 benchmark runs it as a subprocess through `measured_build`, which samples the resident
 memory of the subprocess and all its descendants every 20 ms (Linux's /proc; elsewhere the
 largest single process, from the OS's own accounting).
@@ -20,9 +21,12 @@ import time
 from pathlib import Path
 
 
-def measured_build(name: str, cache_dir: Path, timeout: float = 1800.0) -> dict:
-    """Build `name` cold in a fresh Python process; its report plus `wall_s`, `peak_mb`."""
+def measured_build(name: str, cache_dir: Path, timeout: float = 1800.0,
+                   derivatives: bool = False) -> dict:
+    """Build `name` (its derivative module with `derivatives`) cold in a fresh Python
+    process; its report plus `wall_s`, `peak_mb`."""
     command = [sys.executable, "-m", "gagen.bench.coldbuild", str(name), str(cache_dir)]
+    command += ["--derivatives"] if derivatives else []
     start = time.perf_counter()
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     sampler = _TreeMemory(proc.pid)
@@ -93,10 +97,11 @@ def main(argv: list[str] | None = None) -> int:
     from ..build.builder import build
     from ..model.resolve import resolve_model
 
-    name, cache_dir = (argv or sys.argv[1:])[:2]
+    args = argv or sys.argv[1:]
+    name, cache_dir = args[:2]
     clear_cache()
     model = resolve_model(name)
-    path, report = build(model, cache_dir=Path(cache_dir))
+    path, report = build(model, cache_dir=Path(cache_dir), derivatives="--derivatives" in args)
     print(json.dumps({"model": model.name, "dof": model.dof, "stages": report.stages,
                       "ops_before_cse": report.ops_before_cse,
                       "ops_after_cse": report.ops_after_cse, "cached": report.cached,

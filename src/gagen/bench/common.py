@@ -149,9 +149,10 @@ def compiled(model, cache_dir: Path, verbose: bool = False):
     """Build a model into `cache_dir` (cold if the folder is new) and load that module.
 
     Returns (dyn, report, {"build_s", "load_s"}). Unlike `gagen.load`, never picks a
-    module shipped with the package: the module timed is the one just built.
+    module shipped with the package: the module timed is the one just built (and its
+    derivative module is built into the same folder on first use).
     """
-    from ..build.builder import build, import_extension
+    from ..build.builder import build, import_extension, load_derivative_module
     from ..runtime.compiled import CompiledDynamics
 
     start = time.perf_counter()
@@ -159,7 +160,8 @@ def compiled(model, cache_dir: Path, verbose: bool = False):
     build_s = time.perf_counter() - start
     start = time.perf_counter()
     module = import_extension(path, report.module_name)
-    dyn = CompiledDynamics(module, model)
+    dyn = CompiledDynamics(module, model, derivatives=lambda _: load_derivative_module(
+        model, cache_dir=cache_dir, verbose=verbose))
     dyn.__dict__["_model"] = model
     return dyn, report, {"build_s": build_s, "load_s": time.perf_counter() - start}
 

@@ -88,6 +88,17 @@ def batched_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def derivatives_table(rows: list[dict]) -> str:
+    lines = [("| model | quantity | implementation | call | median µs | IQR µs (q1–q3) "
+             "| ratio to gagen compiled |"),
+             "|---|---|---|---|--:|--:|--:|"]
+    for r in rows:
+        lines.append(f"| {r.get('model', '')} | {r['quantity']} | {r['implementation']} "
+                     f"| `{r['call']}` | {_num(r['median_us'])} | {_num(r['iqr_us'], 2)} "
+                     f"({_num(r['q1_us'])}–{_num(r['q3_us'])}) | {_ratio(r['ratio'])} |")
+    return "\n".join(lines)
+
+
 def scaling_table(rows: list[dict]) -> str:
     from .scaling import markdown_table
 
@@ -202,6 +213,22 @@ def markdown(results: dict, images: dict | None = None) -> str:
         + "".join(f" Dask overhead per chunk: {r['overhead_per_chunk_s'] * 1e3:.1f} ms."
                   for r in tp.get("rows", []) if "overhead_per_chunk_s" in r),
         throughput_table, None, images)
+    dv = results.get("derivatives", {})
+    lines += _section(
+        results, "derivatives", "The derivatives per call (rrr and the Panda)",
+        "`dyn.forward_dynamics_derivatives`, `inverse_dynamics_derivatives` and "
+        "`coriolis_matrix` from the compiled derivative module against Pinocchio's "
+        "`computeABADerivatives`, `computeRNEADerivatives` and `computeCoriolisMatrix` (the "
+        "Panda: Pinocchio's own URDF parse), and against central differences of gagen's "
+        "compiled forward dynamics (6n states in one stacked call); "
+        f"{dv.get('repeats', '?')} interleaved repeats, ratios to gagen compiled per model "
+        "and quantity (> 1: slower than gagen).", derivatives_table, None, images)
+    if dv.get("builds"):
+        from .derivatives import build_table
+
+        lines += [("Each model's main module and then its derivative module, built cold in "
+                  "fresh processes (the derivative module derives the equations again, then "
+                  "their derivatives):"), "", build_table(dv["builds"]), ""]
     pa = results.get("panda", {})
     lines += _section(
         results, "panda", "Per call on the Panda (9 coordinates: 7 arm joints and 2 fingers, from its URDF)",

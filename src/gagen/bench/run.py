@@ -2,7 +2,9 @@
 
 Sections: per call on rrr (gagen's backends, Pinocchio, PyDy, plain SymPy), batched
 forward dynamics, the paper's 5-s simulation with each integrator, the scaling study
-(cold builds of chains and URDF robots) and, with --full, the Panda against Pinocchio.
+(cold builds of chains and URDF robots), the derivatives (per call on rrr and the Panda
+against Pinocchio and central differences; the derivative module's cold build) and, with
+--full, the Panda against Pinocchio.
 Writes results.json (after every section, so an interrupted run keeps what it measured),
 report.md and the PNG plots into the output folder.
 """
@@ -20,10 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
+from . import peers
 from .common import PANDA, Progress, compiled, find_urdf_dir, machine_info, optional
 
-SECTIONS = ("percall", "batched", "simulation", "throughput", "scaling", "panda", "floating",
-            "regressor")
+SECTIONS = ("percall", "batched", "simulation", "throughput", "scaling", "derivatives",
+            "panda", "floating", "regressor")
 
 
 @dataclass
@@ -45,7 +48,9 @@ class Settings:
     regressor_repeats: int = 31
     identify_repeats: int = 5
     identify_samples: int = 10_000
-    sections: tuple[str, ...] = ("percall", "batched", "simulation", "throughput", "scaling")
+    derivatives_repeats: int = 21
+    sections: tuple[str, ...] = ("percall", "batched", "simulation", "throughput", "scaling",
+                                 "derivatives")
     scaling_models: list[str] | None = None  # None: the mode's default list
     extra: dict = field(default_factory=dict)
 
@@ -58,7 +63,8 @@ class Settings:
                        batched_sizes=(1, 10, 100), simulation_repeats=2, scaling_repeats=3,
                        panda_repeats=3, scaling_models=["chain:2"], throughput_repeats=2,
                        throughput_runs=8, throughput_panda_runs=0, throughput_dask_chunks=0,
-                       regressor_repeats=3, identify_repeats=1, identify_samples=500)
+                       regressor_repeats=3, identify_repeats=1, identify_samples=500,
+                       derivatives_repeats=3)
         return cls()
 
 
@@ -88,7 +94,8 @@ class Bench:
                                      "panda": settings.panda_repeats,
                                      "throughput": settings.throughput_repeats,
                                      "regressor": settings.regressor_repeats,
-                                     "identify": settings.identify_repeats}},
+                                     "identify": settings.identify_repeats,
+                                     "derivatives": settings.derivatives_repeats}},
             "notes": [],
         }
 
@@ -251,6 +258,39 @@ class Bench:
         rows = floating_rows(folder, self.scratch / "floating", s.panda_repeats, s.target_s,
                              progress=lambda text: self.progress("floating", text))
         return {"rows": rows, "repeats": s.panda_repeats}
+    def derivatives(self) -> dict:
+        from ..model.resolve import resolve_model
+        from .derivatives import build_rows, derivative_rows, goal_note
+
+        s = self.settings
+        def say(text):
+            self.progress("derivatives", text)
+
+        models = {"rrr": (self.rrr()["compiled"], peers.pinocchio_model(resolve_model("rrr")))}
+        folder = find_urdf_dir(self.urdf_dir, needed=PANDA) if s.mode != "smoke" else None
+        builds = ["rrr"]
+        if folder is not None:
+            urdf = folder / PANDA
+            dyn = self.loaded.get(str(urdf))
+            if dyn is None:
+                dyn = compiled(resolve_model(urdf), self.scratch / "panda")[0]
+            say("building the Panda's derivative module")
+            models["Panda"] = (dyn, peers.pinocchio_from_urdf(dyn, urdf))
+            builds.append(str(urdf))
+        elif s.mode != "smoke":
+            self.results["notes"].append(f"{PANDA} not found: the derivatives section runs "
+                                         "on rrr only (--urdf-dir).")
+        rows = derivative_rows(models, s.derivatives_repeats, s.target_s, progress=say)
+        for label in models:
+            note = goal_note(rows, label)
+            if note and label == "Panda":
+                self.results["notes"].append(note)
+                say(note)
+        say(f"cold builds of {', '.join(_short(m) for m in builds)}, with and without "
+            "the derivatives")
+        build = build_rows(builds, self.scratch / "derivative-builds", progress=say)
+        return {"rows": rows, "builds": build, "repeats": s.derivatives_repeats}
+
 
     def _panda(self, section: str):
         """(dyn, urdf) of the Panda, built once (or by the scaling study); None, note."""
@@ -310,8 +350,9 @@ class Bench:
     def run(self) -> int:
         failed = 0
         titles = {"percall": "per call", "batched": "batched", "simulation": "simulation",
-                  "throughput": "throughput", "scaling": "scaling", "panda": "panda",
-                  "floating": "floating", "regressor": "regressor"}
+                  "throughput": "throughput", "scaling": "scaling",
+                  "derivatives": "derivatives", "panda": "panda", "floating": "floating",
+                  "regressor": "regressor"}
         try:
             if {"percall", "batched", "simulation", "throughput"} & set(self.settings.sections):
                 start = time.perf_counter()

@@ -26,11 +26,13 @@ from pathlib import Path
 
 from .. import __version__
 from ..codegen.config import CodegenConfig
+from ..codegen.derivatives import generate_derivatives
 from ..codegen.render import c_identifier, generate, write_sources
 from ..errors import BuildError, CompilerNotFoundError
 from ..model.model import Model
 from ..runtime.compiled import CompiledDynamics
 from ..symbolic.derivation import derivation_for, derive_equations
+from ..symbolic.derivatives import derive_derivatives
 from .cache import (  # noqa: F401 (re-exported: the cache's API was here)
     _CHECKSUM_FILE,
     _OWNER_FILE,
@@ -64,26 +66,31 @@ class BuildReport:
     cached: bool = False
 
 
-def source_key(model: Model, derivation: str = "auto", config: CodegenConfig | None = None
-               ) -> str:
+def source_key(model: Model, derivation: str = "auto", config: CodegenConfig | None = None,
+               derivatives: bool = False) -> str:
     """Hash of what the generated sources depend on: model, parameter names, the derivation
-    used, the generator's code and templates, and the codegen's settings if not the default."""
+    used, the generator's code and templates, and the codegen's settings if not the default;
+    with `derivatives`, of the model's derivative module (codegen/derivatives.py)."""
     h = hashlib.sha256()
     parts = [model.canonical(), ",".join(model.parameters), __version__, generator_digest(),
              derivation_for(model, derivation)]
     if config is not None and config != CodegenConfig():
         parts.append(repr(config))
+    if derivatives:
+        parts.append("derivatives")
     for part in parts:
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
 
 
-def module_name_for(model: Model, key: str | None = None) -> str:
+def module_name_for(model: Model, key: str | None = None, derivatives: bool = False) -> str:
     """The module's name: the model's identifier and a hash of the model alone (not of the
     generator), so the shipped golden sources keep their names when the generator's code
-    changes. `key` is ignored (earlier versions took the source key)."""
-    return f"gagen_{c_identifier(model.name)}_{model_key(model)[:12]}"
+    changes; `_derivatives` after it for the derivative module. `key` is ignored (earlier
+    versions took the source key)."""
+    name = f"gagen_{c_identifier(model.name)}_{model_key(model)[:12]}"
+    return f"{name}_derivatives" if derivatives else name
 
 
 def model_key(model: Model) -> str:
@@ -123,22 +130,33 @@ class Progress:
 
 def generate_sources(model: Model, folder: Path, progress: Progress | None = None,
                      report: BuildReport | None = None, derivation: str = "auto",
-                     config: CodegenConfig | None = None) -> BuildReport:
+                     config: CodegenConfig | None = None, derivatives: bool = False
+                     ) -> BuildReport:
     """Derive and generate a model's sources into `folder` (no compilation); `config` is
-    the code generator's settings (default: CodegenConfig())."""
-    key = source_key(model, derivation, config)
-    name = module_name_for(model, key)
+    the code generator's settings (default: CodegenConfig()); `derivatives`: the sources of
+    the model's derivative module instead of its main module."""
+    key = source_key(model, derivation, config, derivatives)
+    name = module_name_for(model, key, derivatives)
     report = report or BuildReport(model.name, name, folder)
     progress = progress or Progress(report, verbose=False)
     method = derivation_for(model, derivation)
     progress.say(f"deriving the equations ({method})...")
     start = time.perf_counter()
     eqs = derive_equations(model, method)
-    progress.stage("derive", time.perf_counter() - start,
-                   f"{model.dof} coordinates, {len(eqs.intermediates)} intermediates")
+    if derivatives:
+        deq = derive_derivatives(eqs)
+        detail = (f"{model.dof} coordinates, {len(deq.intermediates)} intermediates "
+                  f"(equations {eqs.seconds:.2f} s, derivatives {deq.seconds:.2f} s)")
+    else:
+        detail = f"{model.dof} coordinates, {len(eqs.intermediates)} intermediates"
+    progress.stage("derive", time.perf_counter() - start, detail)
     progress.say("generating C (one CSE pass over every output)...")
     start = time.perf_counter()
-    code = generate(eqs, name, key, config)
+    if derivatives:
+        code = generate_derivatives(deq, name, key, source_key(model, derivation, config),
+                                    config)
+    else:
+        code = generate(eqs, name, key, config)
     write_sources(code, folder)
     report.ops_before_cse, report.ops_after_cse = code.ops_before, code.ops_after
     progress.stage("generate", time.perf_counter() - start,
@@ -331,18 +349,19 @@ def build_workers() -> int:
 
 def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
           fast_math: bool = False, verbose: bool = False, portable: bool = False,
-          derivation: str = "auto", config: CodegenConfig | None = None
-          ) -> tuple[Path, BuildReport]:
+          derivation: str = "auto", config: CodegenConfig | None = None,
+          derivatives: bool = False) -> tuple[Path, BuildReport]:
     """Derive, generate and compile; return the extension's path and what was done.
 
     With `out`, the sources and the module are written there. Otherwise the cache is used
     (its key covers `config`, the code generator's settings, when not the default):
     an entry whose module matches its stored checksum is reused as it is; a corrupt or
-    incomplete one is rebuilt with a CacheWarning.
+    incomplete one is rebuilt with a CacheWarning. `derivatives`: the model's derivative
+    module (codegen/derivatives.py), a module and a cache entry of its own.
     """
     flags = compile_flags(fast_math, portable)
-    src_key = source_key(model, derivation, config)
-    name = module_name_for(model, src_key)
+    src_key = source_key(model, derivation, config, derivatives)
+    name = module_name_for(model, src_key, derivatives)
     suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
     if out is None:
         cache = usable_cache_dir(Path(cache_dir) if cache_dir else default_cache_dir())
@@ -359,12 +378,13 @@ def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
         final = Path(out)
     report = BuildReport(model.name, name, final)
     progress = Progress(report, verbose)
-    progress.say(f"building '{model.name}' ({model.dof} coordinates) into {final}")
+    what = "the derivatives of " if derivatives else ""
+    progress.say(f"building {what}'{model.name}' ({model.dof} coordinates) into {final}")
     created = _make_parents(final.parent)
     tmp = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=final.parent))
     try:
         (tmp / _OWNER_FILE).write_text(f"{socket.gethostname()} {os.getpid()}\n")
-        generate_sources(model, tmp, progress, report, derivation, config)
+        generate_sources(model, tmp, progress, report, derivation, config, derivatives)
         workers = build_workers()
         progress.say(f"compiling with {' '.join(flags)} (Cython and the C compiler, "
                      f"{workers} at a time)...")
@@ -424,37 +444,69 @@ def shipped_module(model: Model, fast_math: bool, portable: bool = False,
 
 def load_compiled(model: Model, cache_dir: Path | None = None, fast_math: bool = False,
                   verbose: bool | None = None, portable: bool = False, model_ref=None,
-                  input_digest: str | None = None, derivation: str = "auto"
-                  ) -> CompiledDynamics:
+                  input_digest: str | None = None, derivation: str = "auto",
+                  derivatives=None) -> CompiledDynamics:
     """The compiled backend of `gagen.load`: shipped module, cached module, or a new build.
 
     With `input_digest` (gagen.load's key of the input bytes), the module found is recorded
-    in the cache's index, so the next load of the same input needs no SymPy.
+    in the cache's index, so the next load of the same input needs no SymPy. `derivatives`
+    finds or builds the derivative module on first use (`CompiledDynamics`); by default
+    `load_derivative_module` with these options.
     """
-    key = source_key(model, derivation)
+    options = {"cache_dir": cache_dir, "fast_math": fast_math, "portable": portable,
+               "verbose": bool(verbose), "derivation": derivation}
     module = shipped_module(model, fast_math, portable, derivation)
     if module is None:
-        options = {"cache_dir": cache_dir, "fast_math": fast_math, "portable": portable,
-                   "verbose": bool(verbose), "derivation": derivation}
-        path, report = build(model, **options)
-        try:
-            module = import_extension(path, report.module_name)
-        except ImportError as exc:
-            if not report.cached:
-                raise BuildError(f"the module just built for '{model.name}' does not import: "
-                                 f"{exc}") from None
-            # intact bytes that do not import (a library it links against changed): rebuild
-            warnings.warn(f"gagen: the cached module {path} does not import ({exc}); "
-                          "rebuilding it", CacheWarning, stacklevel=2)
-            discard_cache_entry(path.parent)
-            path, report = build(model, **options)
-            module = import_extension(path, report.module_name)
+        module = _import_built(model, options)
+    _checked_and_recorded(module, source_key(model, derivation), model, cache_dir,
+                          input_digest)
+    if derivatives is None:
+        def derivatives(dyn):
+            return load_derivative_module(dyn.model, **options)
+    dyn = CompiledDynamics(module, model if model_ref is None else model_ref,
+                           derivatives=derivatives)
+    dyn.__dict__["_model"] = model
+    return dyn
+
+
+def load_derivative_module(model: Model, cache_dir: Path | None = None, fast_math: bool = False,
+                           verbose: bool | None = None, portable: bool = False,
+                           derivation: str = "auto", input_digest: str | None = None):
+    """The derivative module of a model (codegen/derivatives.py): from the cache, or built
+    now, showing its progress as `build` does. With `input_digest` (the derivative key of
+    gagen.load's input key, `cache.derivatives_input_key`), it is recorded in the cache's
+    index, so the next load of the same input finds it without SymPy."""
+    module = _import_built(model, {"cache_dir": cache_dir, "fast_math": fast_math,
+                                   "portable": portable, "verbose": bool(verbose),
+                                   "derivation": derivation, "derivatives": True})
+    _checked_and_recorded(module, source_key(model, derivation, derivatives=True), model,
+                          cache_dir, input_digest)
+    return module
+
+
+def _checked_and_recorded(module, key: str, model: Model, cache_dir, input_digest) -> None:
+    """BuildError unless `module` was built from these sources; then, with `input_digest`,
+    record it in the cache's index."""
     if module.KEY != key:
         raise BuildError(f"module {module.__name__} was not built from this version of "
                          f"model '{model.name}' (its key {module.KEY[:12]}, expected {key[:12]})")
     if input_digest is not None:
         index_record(usable_cache_dir(Path(cache_dir) if cache_dir else default_cache_dir()),
                      input_digest, module)
-    dyn = CompiledDynamics(module, model if model_ref is None else model_ref)
-    dyn.__dict__["_model"] = model
-    return dyn
+
+
+def _import_built(model: Model, options: dict):
+    """Build (or find in the cache) and import a module; a cached module whose intact bytes
+    do not import (a library it links against changed) is rebuilt once."""
+    path, report = build(model, **options)
+    try:
+        return import_extension(path, report.module_name)
+    except ImportError as exc:
+        if not report.cached:
+            raise BuildError(f"the module just built for '{model.name}' does not import: "
+                             f"{exc}") from None
+        warnings.warn(f"gagen: the cached module {path} does not import ({exc}); "
+                      "rebuilding it", CacheWarning, stacklevel=3)
+        discard_cache_entry(path.parent)
+        path, report = build(model, **options)
+        return import_extension(path, report.module_name)

@@ -131,6 +131,12 @@ def input_key(model, flags: list[str]) -> str | None:
                  _packages_digest(PIPELINE_PACKAGES), *_binary_interface(), *extra)
 
 
+def derivatives_input_key(key: str) -> str:
+    """The index key of the derivative module built from the same input as the module of
+    `key` (an `input_key`), so that it too is found without SymPy."""
+    return _hash("gagen-derivatives", key)
+
+
 def _referenced_files(path: Path) -> list[bytes] | None:
     """An MJCF model also depends on the files it includes, its assets and MuJoCo's version
     (None if they cannot be checked here: the model stage reports why)."""

@@ -281,8 +281,10 @@ class _Kernels:
     them, and splits the large ones into segment functions (codegen/segments.py)."""
 
     def __init__(self, ident: str, cse: CSEResult, printer: GagenCPrinter,
-                 config: CodegenConfig):
+                 config: CodegenConfig, arrays: dict[str, tuple[str, ...]] = KERNEL_ARRAYS,
+                 looped: tuple[str, ...] = LOOPED_KERNELS):
         self.ident, self.cse, self.printer = ident, cse, printer
+        self.arrays, self.looped = arrays, looped  # another module's kernels: its own
         self.split_chars, self.segment_chars = config.split_chars, config.segment_chars
         self.printed: dict[sp.Symbol, str] = {}
         self.segments: list[Segment] = []  # of every split kernel, in order
@@ -321,12 +323,12 @@ class _Kernels:
         segments, workspace = split(f"{self.ident}_{kernel}", _trig(printer, all_exprs),
                                     statements, outputs, externals=dict(reads),
                                     segment_chars=self.segment_chars)
-        arrays = KERNEL_ARRAYS[kernel]
+        arrays = self.arrays[kernel]
         params = ", ".join([f"const double *restrict {a}" for a in arrays[:-1]]
                            + [f"double *restrict {arrays[-1]}"])
         for segment in segments:
             segment.params = params
-            segment.looped = kernel in LOOPED_KERNELS
+            segment.looped = kernel in self.looped
         block.segments, block.workspace = segments, workspace
         block.params, block.args = params, ", ".join(arrays)
         self.segments.extend(segments)
@@ -456,6 +458,23 @@ def _regressor_blocks(eqs: Equations, kernels: _Kernels,
     return blocks
 
 
+def model_context(eqs: Equations) -> dict:
+    """What every template says about the model: its identifier, sizes, and the names of
+    its coordinates and parameters with the defaults."""
+    ident = c_identifier(eqs.model.name)
+    return {
+        "ident": ident,
+        "IDENT": ident.upper(),
+        "n": eqs.n,
+        "np": len(eqs.parameters),
+        "nq": eqs.nq,
+        # user names reach the sources only as identifiers (comments of the header)
+        "coordinates": [c_identifier(c) for c in eqs.model.coordinates],
+        "parameters": [(c_identifier(k), repr(float(v)))
+                       for k, v in eqs.model.parameters.items()],
+    }
+
+
 def generate(eqs: Equations, module_name: str, key: str,
              config: CodegenConfig | None = None) -> GeneratedCode:
     """Generate the C sources, header and Cython wrapper of a model (file name -> text).
@@ -492,15 +511,9 @@ def generate(eqs: Equations, module_name: str, key: str,
     info = ModelInfo.from_model(model)
     zero = {(r, s) for (r, s), e in zip(lower, out["mass_matrix"]) if e == 0}
     context = {
-        "ident": ident,
-        "IDENT": ident.upper(),
-        "n": n,
-        "np": len(eqs.parameters),
-        "nq": eqs.nq,
+        **model_context(eqs),
         "nreg": len(eqs.regressor_parameters),
         "width_index": friction_width_index(eqs),
-        # user names reach the sources only as identifiers (comments of the header)
-        "coordinates": [c_identifier(c) for c in model.coordinates],
         "configuration": [c_identifier(c) for c in model.configuration],
         # where each floating joint starts in q and qd, and the entry of q of each
         # velocity coordinate that is a plain number (-1: a floating joint's)
@@ -512,7 +525,6 @@ def generate(eqs: Equations, module_name: str, key: str,
         "tree": info.bodies,
         "frame_bodies": [body for _, body, _ in info.frames],
         "frame_names": [c_identifier(name) for name, _, _ in info.frames],
-        "parameters": [(c_identifier(k), repr(float(v))) for k, v in model.parameters.items()],
         "lower": lower,
         "ldlt": ldlt_plan(n, zero),
         "blocks": blocks,

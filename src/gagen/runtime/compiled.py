@@ -3,12 +3,16 @@ API of `Dynamics` (no SymPy: names and defaults come from the module's manifest)
 
 from __future__ import annotations
 
+from ..errors import BuildError
 from ..manifest import ModelInfo
 from .dynamics import Dynamics
 from .frames import frame_index
 
 KERNEL_METHODS = ("mass_matrix", "forcing", "forward_dynamics", "inverse_dynamics",
                   "gravity", "energy", "regressor", "regressor_parameters")
+# the methods of a model's derivative module (codegen/derivatives.py), bound on first use
+DERIVATIVE_METHODS = ("inverse_dynamics_derivatives", "forward_dynamics_derivatives",
+                      "coriolis_matrix", "linearize")
 
 
 class CompiledDynamics(Dynamics):
@@ -16,14 +20,20 @@ class CompiledDynamics(Dynamics):
 
     The module's kernel methods are bound to the instance, so a call costs no Python frame
     of gagen's; they check their inputs like every backend (gagen.runtime.inputs).
+
+    The derivatives are in a second module of their own, so that they never slow down a
+    model's default build: `derivatives(dyn)` finds or builds it (gagen.load supplies it),
+    on the first call of a derivative method, or up front with `load_derivatives()`.
     """
 
     backend = "compiled"
 
-    def __init__(self, module, model_ref=None):
+    def __init__(self, module, model_ref=None, derivatives=None):
         self.module = module
         self.info = ModelInfo.from_hex(module.MANIFEST_HEX)
         self._model_ref = model_ref
+        self._derivatives = derivatives
+        self.derivative_module = None
         self.kernels = module.CompiledModel(self.parameter_vector, self.external_forces)
         for name in KERNEL_METHODS:
             setattr(self, name, getattr(self.kernels, name))
@@ -47,21 +57,54 @@ class CompiledDynamics(Dynamics):
     def frame_velocity(self, q, qd, frame, p=None):
         return self.kernels.frame(2, frame_index(self.info, frame), q, qd, p)
 
-    # The derivative kernels are generated in the next step (issue 15, phase 2); until
-    # then the compiled backend says so instead of computing them some slower way.
+    # --- derivatives: the second module ---------------------------------------------------
+
+    def load_derivatives(self) -> None:
+        """Find or build the derivative module now, and bind its methods."""
+        if self.derivative_module is not None:
+            return
+        if self.nq != self.nv:
+            raise NotImplementedError(
+                "the derivatives of a floating base (q holds a quaternion) are not there yet; "
+                "they are for models with one q entry per velocity")
+        if self._derivatives is None:
+            raise RuntimeError(
+                "this dynamics object was made from a module alone, without a way to find or "
+                "build its derivative module; load the model with gagen.load(model)")
+        self.bind_derivatives(self._derivatives(self))
+
+    def bind_derivatives(self, module) -> None:
+        """Bind the methods of a derivative module built from this module's equations."""
+        if module.EQUATIONS_KEY != self.module.KEY:
+            raise BuildError(
+                f"the derivative module {module.__name__} was not built from the equations of "
+                f"{self.module.__name__} (its key {module.EQUATIONS_KEY[:12]}, expected "
+                f"{self.module.KEY[:12]})")
+        kernels = module.CompiledDerivatives(self.parameter_vector)
+        for name in DERIVATIVE_METHODS:
+            setattr(self, name, getattr(kernels, name))
+        self.derivative_module = module
+
+    # Until the derivative module is bound, these find it, then call its method (bound to
+    # the instance from then on, so later calls go straight to the compiled code).
 
     def inverse_dynamics_derivatives(self, q, qd, qdd, p=None):
-        raise NotImplementedError(_NO_DERIVATIVES_YET)
+        self.load_derivatives()
+        return self.inverse_dynamics_derivatives(q, qd, qdd, p)
 
     def forward_dynamics_derivatives(self, q, qd, tau, p=None):
-        raise NotImplementedError(_NO_DERIVATIVES_YET)
+        self.load_derivatives()
+        return self.forward_dynamics_derivatives(q, qd, tau, p)
 
     def coriolis_matrix(self, q, qd, p=None):
-        raise NotImplementedError(_NO_DERIVATIVES_YET)
+        self.load_derivatives()
+        return self.coriolis_matrix(q, qd, p)
 
+    def linearize(self, q, qd, tau, p=None):
+        self.load_derivatives()
+        return self.linearize(q, qd, tau, p)
 
-_NO_DERIVATIVES_YET = (
-    "the compiled backend does not have the derivatives yet (compiled derivative kernels "
-    "are coming in the next step); use gagen.load(model, backend=\"lambdify\") for "
-    "inverse_dynamics_derivatives, forward_dynamics_derivatives, coriolis_matrix and "
-    "linearize for now")
+    inverse_dynamics_derivatives.__doc__ = Dynamics.inverse_dynamics_derivatives.__doc__
+    forward_dynamics_derivatives.__doc__ = Dynamics.forward_dynamics_derivatives.__doc__
+    coriolis_matrix.__doc__ = Dynamics.coriolis_matrix.__doc__
+    linearize.__doc__ = Dynamics.linearize.__doc__

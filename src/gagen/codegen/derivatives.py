@@ -1,0 +1,181 @@
+"""The derivative module's C: the derivatives of the dynamics (symbolic/derivatives.py)
+printed as four C functions, in a module of their own.
+
+The derivative program is large (the Panda's inverse-dynamics derivatives are ten times
+its inverse dynamics), so it is not part of a model's main module: a model's default build
+stays as fast as it was, and `gagen.load` builds this module on first use of a derivative
+(gagen.build.builder). Its files do not clash with the main module's: the header is
+`<ident>_derivatives.h`, the C file `derivatives.c`, the segment functions of split
+kernels `derivative_kernels_<k>.c`, and every function is `<ident>_...`, so a C program can
+compile both modules' sources together.
+
+One CSE pass runs over every output (M, the forcing F, dtau/dq, dtau/dqd and C; for the
+Gibbs-Appell form only, as in the main module). The inverse-dynamics derivatives are
+then split like the simulation's forward dynamics (codegen/stages.py), at qdd:
+
+- `fixed` (q, qd, p) -> S: dtau/dqd (free of qdd) and every value free of qdd that the two
+  other stages read (the kinematics, velocities and their derivatives, and the parts of
+  dtau/dq free of qdd, hoisted);
+- `acceleration` (S, q, qd, qdd, p) -> dtau/dq: the rest;
+- `mass_forcing` (S, q, qd, tau, p) -> M and F: what M and F need that `fixed` did not
+  compute.
+
+So the forward-dynamics derivatives cost one pass over the derivative program plus M and F,
+not two passes: fixed, mass_forcing, the LDL^T factors of M and qdd = M^-1 F (the main
+module's unrolled plan, codegen/ldlt.py), then acceleration at that qdd, and the triangular
+solves with the same factors for -M^-1 dtau/dq, -M^-1 dtau/dqd and M^-1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import resources
+
+import sympy as sp
+
+from .. import __version__
+from ..symbolic.derivatives import DerivativeEquations
+from ..symbolic.differentiate import needed_definitions
+from .config import CodegenConfig
+from .cse import CSEResult
+from .ldlt import ldlt_plan
+from .render import (
+    CodeBlock,
+    GagenCPrinter,
+    GeneratedCode,
+    _Kernels,
+    _symbol_names,
+    c_identifier,
+    kernel_files,
+    model_context,
+    template_environment,
+)
+from .stages import split_stages
+
+# The derivative module's kernels and their C arrays, in the order their segment functions
+# take them (then `w`); the last one is the kernel's output (render.KERNEL_ARRAYS).
+DERIVATIVE_KERNEL_ARRAYS = {
+    "derivatives_fixed": ("q", "qd", "p", "S"),
+    "derivatives_acceleration": ("S", "q", "qd", "qdd", "p", "J"),
+    "derivatives_mass_forcing": ("S", "q", "qd", "tau", "p", "MF"),
+    "coriolis_matrix": ("q", "qd", "p", "C"),
+}
+# Every one of them runs in loops (stacked inputs, MPC): built with the FMA clone too.
+DERIVATIVE_LOOPED_KERNELS = tuple(DERIVATIVE_KERNEL_ARRAYS)
+# gagen's files that the derivative module's C needs next to it
+DERIVATIVE_COPIED_FILES = ("gagen_math.h",)
+
+
+@dataclass
+class DerivativeBlocks:
+    """The code of the derivative module's kernels and the layout of S, the values the
+    `fixed` stage passes on: dtau/dqd at S[0 .. n^2), then the interface of the others."""
+
+    fixed: CodeBlock
+    acceleration: CodeBlock
+    mass_forcing: CodeBlock
+    coriolis: CodeBlock
+    size: int  # doubles of S
+
+
+def derivative_program(deq: DerivativeEquations
+                       ) -> tuple[list[tuple[sp.Symbol, sp.Expr]], dict[str, list[sp.Expr]]]:
+    """The outputs of the derivative module (name -> list) and the definitions they need."""
+    eqs, n = deq.equations, deq.n
+    outputs = {
+        "mass_matrix": [eqs.mass_matrix[r, s] for r in range(n) for s in range(r + 1)],
+        "forcing": list(eqs.forcing),
+        "dtau_dq": list(deq.dtau_dq),
+        "dtau_dqd": list(deq.dtau_dqd),
+        "coriolis": list(deq.coriolis),
+    }
+    flat = [e for values in outputs.values() for e in values]
+    return needed_definitions(deq.intermediates, flat), outputs
+
+
+def _blocks(deq: DerivativeEquations, kernels: _Kernels) -> DerivativeBlocks:
+    cse, printer, coords = kernels.cse, kernels.printer, deq.equations.coords
+    n = deq.n
+    out = cse.outputs
+    split = split_stages(cse.needed(out["dtau_dq"] + out["dtau_dqd"]), out["dtau_dqd"],
+                         out["dtau_dq"], set(coords.qdd))
+    hoisted = [a for a in split.position if not printer.names(a.symbol)]
+    printer.bind_names({a.symbol: f"h{k}" for k, a in enumerate(hoisted)})
+    fixed_symbols = {a.symbol for a in split.position}
+    mass_forcing_outputs = out["mass_matrix"] + out["forcing"]
+    mass_forcing = [a for a in cse.needed(mass_forcing_outputs) if a.symbol not in fixed_symbols]
+    read = set().union(*(a.expr.free_symbols for a in mass_forcing),
+                       *(e.free_symbols for e in mass_forcing_outputs))
+    # S: dtau/dqd, then what the acceleration stage reads, then what M and F read besides
+    interface = list(split.interface)
+    interface += [a.symbol for a in split.position if a.symbol in read
+                  and a.symbol not in set(split.interface)]
+    at = {symbol: f"S[{n * n + k}]" for k, symbol in enumerate(interface)}
+    fixed = kernels.block("derivatives_fixed", out["dtau_dqd"] + interface,
+                          [f"S[{k}]" for k in range(n * n)] + list(at.values()),
+                          assignments=split.position)
+    acceleration = kernels.block("derivatives_acceleration", split.velocity_outputs,
+                                 [f"J[{k}]" for k in range(n * n)],
+                                 assignments=split.velocity,
+                                 externals={s: at[s] for s in split.interface}, cache=False)
+    lower = [(r, s) for r in range(n) for s in range(r + 1)]
+    targets = [f"MF[{r * n + s}]" for r, s in lower] + [f"MF[{n * n + r}]" for r in range(n)]
+    mass_forcing_block = kernels.block(
+        "derivatives_mass_forcing", mass_forcing_outputs, targets, assignments=mass_forcing,
+        externals={s: at[s] for s in interface if s in read})
+    coriolis = kernels.block("coriolis_matrix", out["coriolis"],
+                             [f"C[{k}]" for k in range(n * n)])
+    return DerivativeBlocks(fixed, acceleration, mass_forcing_block, coriolis,
+                            size=n * n + len(interface))
+
+
+def generate_derivatives(deq: DerivativeEquations, module_name: str, key: str,
+                         equations_key: str, config: CodegenConfig | None = None
+                         ) -> GeneratedCode:
+    """The C sources, header and Cython wrapper of a model's derivative module (file name
+    -> text). `equations_key` is the source key of the model's main module: the wrapper
+    carries it, so the runtime pairs the two modules of the same equations only."""
+    config = config or CodegenConfig()
+    eqs = deq.equations
+    if eqs.nq != eqs.n:
+        raise NotImplementedError(
+            f"model '{eqs.model.name}': the derivatives of a floating base (q holds a "
+            "quaternion) are not there yet; they are for models with one q entry per velocity")
+    ident = c_identifier(eqs.model.name)
+    definitions, outputs = derivative_program(deq)
+    cse = CSEResult(eqs, eqs.derivation == "gibbs-appell" if config.cse is None
+                    else config.cse, definitions, outputs)
+    printer = GagenCPrinter(_symbol_names(eqs, cse), list(eqs.coords.q), config.fast_trig)
+    kernels = _Kernels(ident, cse, printer, config, arrays=DERIVATIVE_KERNEL_ARRAYS,
+                       looped=DERIVATIVE_LOOPED_KERNELS)
+    blocks = _blocks(deq, kernels)
+    n = eqs.n
+    lower = [(r, s) for r in range(n) for s in range(r + 1)]
+    zero = {(r, s) for (r, s), e in zip(lower, cse.outputs["mass_matrix"]) if e == 0}
+    header = f"generated by gagen {__version__} for model '{ident}'; do not edit"
+    context = {
+        **model_context(eqs),
+        "ldlt": ldlt_plan(n, zero),
+        "blocks": blocks,
+        "module_name": module_name,
+        "key": key,
+        "equations_key": equations_key,
+        "header": header,
+    }
+    env = template_environment()
+    files = {
+        f"{ident}_derivatives.h": env.get_template("model/derivatives.h.j2").render(context),
+        "derivatives.c": env.get_template("model/derivatives.c.j2").render(context),
+        f"{module_name}.pyx": env.get_template("cython/derivatives.pyx.j2").render(context),
+    }
+    # kernels.c.j2 includes "<ident>.h": here the segment files include this module's header
+    segment_context = {"header": header, "ident": f"{ident}_derivatives"}
+    kernels_template = env.get_template("model/kernels.c.j2")
+    for k, segments in enumerate(kernel_files(kernels.segments, config.file_chars)):
+        files[f"derivative_kernels_{k}.c"] = kernels_template.render(segment_context,
+                                                                     segments=segments)
+    for name in DERIVATIVE_COPIED_FILES:
+        text = resources.files("gagen.codegen").joinpath("templates", "c", name).read_text()
+        files[name] = f"/* {header} (copied from gagen's templates) */\n" + text
+    return GeneratedCode(files=files, ops_before=cse.ops_before, ops_after=cse.ops_after,
+                         cse_seconds=cse.seconds, module_name=module_name, ident=ident)
