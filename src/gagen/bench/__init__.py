@@ -2,7 +2,7 @@
 
 Modules: `timing` (the interleaved runner every section uses), `peers` (Pinocchio, PyDy
 and plain SymPy versions of the same robot), `percall`, `batched`, `simulation`,
-`scaling`, `report` (report.md and PNG plots) and `run` (the whole suite). Pinocchio and
+`scaling`, `coldbuild`, `pinocchio_cpp`, `floating`, `derivatives`, `report` (report.md and PNG plots) and `run` (the whole suite). Pinocchio and
 PyDy are optional (`pip install gagen[bench]`); without them their rows are skipped.
 
 This module holds only the command's description (gagen.app.cli parses the command line);
@@ -25,13 +25,25 @@ Default (a few minutes on 2 cores):
   throughput        many simulations: simulate_batch on 1 thread and every core, a Python
                     loop over simulate, MuJoCo's rollout on the Panda (same RK4, no
                     contacts), and Dask's overhead per chunk on a LocalCluster
-  scaling           cold builds of chain:2, chain:4, chain:6 and the UR5: derive, generate,
-                    compile times, operations before/after CSE, forward dynamics per call
---full adds chain:3 ... chain:12 and the Panda to the scaling study, the Panda against
-Pinocchio per call, and the regressor section (tens of minutes):
+  scaling           cold builds of chain:2, chain:4, chain:6 and the UR5 (each in a fresh
+                    process): derive, generate, compile times, peak memory, operations
+                    before/after CSE, forward dynamics per call
+  derivatives       FD/ID derivatives and the Coriolis matrix on rrr and the Panda against
+                    Pinocchio's computeABADerivatives / computeRNEADerivatives /
+                    computeCoriolisMatrix and central differences; the derivative
+                    module's cold build
+--full adds, in tens of minutes:
+  scaling           chain:5 ... chain:50, UR5, Panda, ANYmal C, Talos reduced and full and
+                    Tiago (fixed bases): build times and the curve; FD, ID and M per call
+                    from Python against Pinocchio's aba / rnea / crba, and per state in
+                    the batched C loop against Pinocchio's C++ (a harness compiled with
+                    -O3 -march=native)
+  panda             the Panda per call against Pinocchio
+  floating          ANYmal C and Talos on a floating base: FD, ID, M and a foot Jacobian
+                    against Pinocchio (and MuJoCo's mj_forward if installed)
   regressor         the Panda's regressor per call against Pinocchio's
                     computeJointTorqueRegressor; identification from 10,000 samples
                     (gagen.identify against Pinocchio's regressor in a loop + lstsq)
-
+--only SECTION ... runs the named sections alone.
 Candidates are timed interleaved (round-robin over the repeats); reported are medians,
 interquartile ranges and ratios to a baseline."""

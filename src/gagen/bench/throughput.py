@@ -6,8 +6,9 @@ Workloads:
            rtol = 1e-6, atol = 1e-8, 501 samples), N runs with m3 drawn in 40 ... 60 kg
     panda  the Panda (URDF) under `default_controller` (PD with gravity compensation),
            fixed-step RK4, h = 1 ms, 1 s, the state at every step; against MuJoCo's
-           `rollout` on the same URDF (meshes, joint damping and contacts left out,
-           constraints disabled, the same RK4 and step, the PD as position actuators
+           `rollout` on the same URDF (meshes and contacts left out, the joints'
+           damping kept in both, as gagen reads it into its joint terms; constraints
+           disabled, the same RK4 and step, the PD as position actuators
            with kp and kv, gravity compensation as gravcomp = 1 on every body): the
            choice a MuJoCo user would make. Both give the same trajectory (checked).
 
@@ -75,7 +76,7 @@ def mujoco_panda(urdf: Path, ctrl_spec: dict, coordinates: list[str]):
 
     root = ET.parse(urdf).getroot()
     for parent in list(root.iter("link")) + list(root.iter("joint")):
-        for tag in ("visual", "collision", "dynamics"):
+        for tag in ("visual", "collision"):
             for element in parent.findall(tag):
                 parent.remove(element)
     spec = mujoco.MjSpec.from_string(ET.tostring(root, encoding="unicode"))
