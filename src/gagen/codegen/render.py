@@ -23,7 +23,12 @@ from ..manifest import FRICTION_WIDTH, QUATERNION_RESTORING, ModelInfo
 from ..symbolic.differentiate import needed_definitions
 from ..symbolic.frames import add_frame_kinematics
 from ..symbolic.gibbs_appell import Equations
-from ..symbolic.regressor import with_regressor
+from ..symbolic.regressor import (
+    KINEMATICS_PER_BODY,
+    RegressorKinematics,
+    regressor_kinematics,
+    regressor_parameters,
+)
 from .config import INLINE_STAGE_OPS, CodegenConfig  # noqa: F401 (re-exported)
 from .cse import CSEResult, operation_count
 from .ldlt import factor_pattern, ldlt_plan  # noqa: F401 (factor_pattern re-exported)
@@ -263,7 +268,7 @@ KERNEL_ARRAYS = {
     "velocity_aba": ("S", "q", "qd", "tau", "p", "qdd"),
     "placements": ("q", "p", "X"),
     "frame_offsets": ("p", "F"),
-    "regressor": ("q", "qd", "qdd", "p", "Y"),
+    "regressor_kinematics": ("q", "qd", "qdd", "p", "K"),
     "regressor_parameters": ("p", "pi"),
 }
 
@@ -273,7 +278,7 @@ KERNEL_ARRAYS = {
 # Measured on a 50-link chain: inverse dynamics 2.04 -> 1.54 us and forward dynamics
 # 4.84 -> 3.79 us per call, for 1.8 times their compile time.
 LOOPED_KERNELS = ("inverse_dynamics", "gravity", "position", "velocity", "velocity_aba",
-                  "mass_matrix", "regressor")
+                  "mass_matrix")
 
 
 class _Kernels:
@@ -439,21 +444,24 @@ def _stages(eqs: Equations, kernels: _Kernels, inline_stage_ops: int) -> Stages:
                   aba=aba)
 
 
-def _regressor_blocks(eqs: Equations, kernels: _Kernels,
-                      config: CodegenConfig) -> dict[str, CodeBlock]:
-    """The regressor's functions, from a CSE of their own (eliminating as the dynamics'
-    does): what they share with the dynamics is in different C functions anyway, and the
+def _regressor_blocks(eqs: Equations, kernels: _Kernels, config: CodegenConfig,
+                      reg: RegressorKinematics) -> dict[str, CodeBlock]:
+    """The regressor's functions: the per-body kinematics its C loop reads and pi
+    (model/regressor.c.j2), from a CSE of their own (eliminating as the dynamics' does):
+    what they share with the dynamics is in different C functions anyway, and the
     dynamics' kernels stay as they are without it. Their segment functions, if any, join
     `kernels`'."""
-    outputs = eqs.regressor_outputs()
-    program = needed_definitions(eqs.intermediates + eqs.regressor_intermediates,
+    outputs = {"regressor_kinematics": reg.values,
+               "regressor_parameters": regressor_parameters(eqs.model)}
+    program = needed_definitions(reg.intermediates,
                                  [e for values in outputs.values() for e in values])
     cse = CSEResult(eqs, kernels.cse.eliminated, program, outputs)
     printer = GagenCPrinter(_symbol_names(eqs, cse), list(eqs.coords.q), config.fast_trig)
     own = _Kernels(kernels.ident, cse, printer, config)
     blocks = {name: own.block(name, cse.outputs[name],
                               [f"{target}[{k}]" for k in range(len(cse.outputs[name]))])
-              for name, target in (("regressor", "Y"), ("regressor_parameters", "pi"))}
+              for name, target in (("regressor_kinematics", "K"),
+                                   ("regressor_parameters", "pi"))}
     kernels.segments.extend(own.segments)
     return blocks
 
@@ -479,12 +487,12 @@ def generate(eqs: Equations, module_name: str, key: str,
              config: CodegenConfig | None = None) -> GeneratedCode:
     """Generate the C sources, header and Cython wrapper of a model (file name -> text).
 
-    The regressor is attached to `eqs` (a copy) if it is not yet (symbolic.regressor),
-    after the frames' kinematics: its program continues theirs."""
+    The regressor's kinematics (symbolic.regressor.regressor_kinematics) continue the
+    program after the frames' kinematics."""
     config = config or CodegenConfig()
     if eqs.placements is None:  # equations written without the frames' kinematics
         eqs = add_frame_kinematics(eqs)
-    eqs = with_regressor(eqs)
+    reg = regressor_kinematics(eqs)
     model = eqs.model
     ident = c_identifier(model.name)
     cse = CSEResult(eqs, eqs.derivation == "gibbs-appell" if config.cse is None else config.cse)
@@ -505,14 +513,16 @@ def generate(eqs: Equations, module_name: str, key: str,
                                     [f"X[{k}]" for k in range(len(out["placements"]))]),
         "frame_offsets": kernels.block("frame_offsets", out["frame_offsets"],
                                        [f"F[{k}]" for k in range(len(out["frame_offsets"]))]),
-        **_regressor_blocks(eqs, kernels, config),
+        **_regressor_blocks(eqs, kernels, config, reg),
     }
     stages = _stages(eqs, kernels, config.inline_stage_ops)
     info = ModelInfo.from_model(model)
     zero = {(r, s) for (r, s), e in zip(lower, out["mass_matrix"]) if e == 0}
     context = {
         **model_context(eqs),
-        "nreg": len(eqs.regressor_parameters),
+        "nreg": len(regressor_parameters(model)),
+        "reg": reg,
+        "per_body": KINEMATICS_PER_BODY,
         "width_index": friction_width_index(eqs),
         "configuration": [c_identifier(c) for c in model.configuration],
         # where each floating joint starts in q and qd, and the entry of q of each

@@ -18,7 +18,6 @@ from .aba import forward_dynamics_aba_after
 from .frames import add_frame_kinematics
 from .gibbs_appell import Equations, derive
 from .recursive import derive_recursive
-from .regressor import attach_regressor
 
 DERIVATIONS = ("auto", "gibbs-appell", "recursive")
 # From this many coordinates on, "auto" takes the recursive form (with the articulated-body
@@ -50,8 +49,8 @@ def derivation_for(model: Model, derivation: str = "auto") -> str:
 
 
 def derive_equations(model: Model, derivation: str = "auto") -> Equations:
-    """The equations of motion of `model` by the chosen derivation, with the regressor
-    (symbolic.regressor) attached.
+    """The equations of motion of `model` by the chosen derivation, with the frames'
+    kinematics (the regressor is attached on demand: symbolic.regressor.with_regressor).
 
     The recursive form also writes forward dynamics by the articulated-body algorithm
     (`Equations.forward_dynamics`), as a continuation of the same program: O(n) where
@@ -60,9 +59,7 @@ def derive_equations(model: Model, derivation: str = "auto") -> Equations:
         eqs = with_articulated_body(derive_recursive(model))
     else:
         eqs = derive(model)
-    eqs = add_frame_kinematics(eqs)
-    attach_regressor(eqs)
-    return eqs
+    return add_frame_kinematics(eqs)
 
 
 def with_articulated_body(eqs: Equations) -> Equations:

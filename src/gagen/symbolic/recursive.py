@@ -175,6 +175,32 @@ def _rnea(links: list[Link], coords: CoordinateSymbols, rec: Recorder,
     terms and the gravity forces. Forward: accelerations of each frame origin; backward:
     the force F and moment N (about O_i) that the parent exerts through joint i.
     """
+    alpha, acc = accelerations(links, coords, rec, w, qdd, gravity)
+    F = [sp.zeros(3, 1) for _ in links]
+    N = [sp.zeros(3, 1) for _ in links]
+    for i, link in enumerate(links):
+        f, n = _body_wrench(link, alpha[i], acc[i], None if w is None else w[i], rec)
+        F[i], N[i] = F[i] + f, N[i] + n
+    tau: list[sp.Expr] = [sp.Integer(0)] * len(coords.qd)
+    for i in reversed(range(len(links))):
+        link = links[i]
+        F[i], N[i] = rec.vec(F[i]), rec.vec(N[i])
+        if link.free:  # the wrench on the body: force, then moment about its origin
+            tau[link.k: link.k + 6] = [*F[i], *N[i]]
+        elif link.k is not None:
+            tau[link.k] = rec.name(link.axis.dot(N[i] if link.rotates else F[i]))
+        if link.parent is not None:
+            f_up = link.to_parent(F[i], rec)
+            F[link.parent] += f_up
+            N[link.parent] += link.to_parent(N[i], rec) + link.d.cross(f_up)
+    return tau
+
+
+def accelerations(links: list[Link], coords: CoordinateSymbols, rec: Recorder,
+                  w: list[Vec] | None, qdd: list | None, gravity: Vec | None
+                  ) -> tuple[list[Vec], list[Vec]]:
+    """The RNEA's forward pass: each body's angular acceleration and the acceleration of
+    its frame origin (gravity entering as an acceleration -g of the world), in its frame."""
     base = ZERO if gravity is None else -gravity
     alpha: list[Vec] = []
     acc: list[Vec] = []
@@ -203,24 +229,7 @@ def _rnea(links: list[Link], coords: CoordinateSymbols, rec: Recorder,
                 a_in = a_in + 2 * w_in.cross(s * coords.qd[link.k])
         alpha.append(rec.vec(alpha_in))
         acc.append(rec.vec(a_in))
-    F = [sp.zeros(3, 1) for _ in links]
-    N = [sp.zeros(3, 1) for _ in links]
-    for i, link in enumerate(links):
-        f, n = _body_wrench(link, alpha[i], acc[i], None if w is None else w[i], rec)
-        F[i], N[i] = F[i] + f, N[i] + n
-    tau: list[sp.Expr] = [sp.Integer(0)] * len(coords.qd)
-    for i in reversed(range(len(links))):
-        link = links[i]
-        F[i], N[i] = rec.vec(F[i]), rec.vec(N[i])
-        if link.free:  # the wrench on the body: force, then moment about its origin
-            tau[link.k: link.k + 6] = [*F[i], *N[i]]
-        elif link.k is not None:
-            tau[link.k] = rec.name(link.axis.dot(N[i] if link.rotates else F[i]))
-        if link.parent is not None:
-            f_up = link.to_parent(F[i], rec)
-            F[link.parent] += f_up
-            N[link.parent] += link.to_parent(N[i], rec) + link.d.cross(f_up)
-    return tau
+    return alpha, acc
 
 
 def _parent_accelerations(link: Link, alpha: list[Vec], acc: list[Vec], w: list[Vec] | None,

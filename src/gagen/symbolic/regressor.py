@@ -14,10 +14,18 @@ damping, friction and armature. So
 the bodies in Pinocchio's convention (`Inertia.toDynamicParameters`); bodies welded by
 fixed joints count as one, as Pinocchio's URDF parser merges them (model.merge).
 
-Y is derived, not written down: the recursive Newton-Euler algorithm of `recursive` runs
-with fresh symbols for every body's (m, h, I_O), and `differentiate` takes its
-derivatives with respect to them through the named intermediates. Y depends on q, qd, qdd
-and the kinematic parameters (lengths, gravity); pi on the inertial and joint parameters.
+Y is written row by row over the tree, in body frames. Body k's wrench about its origin,
+f = m a + alpha x h + w x (w x h) and n = I_O alpha + w x (I_O w) + h x a (w, alpha, a: its
+angular velocity, angular acceleration and origin acceleration, gravity included, from the
+RNEA's forward pass), is linear in (m, h, I_O). Joint i's torque takes the wrenches of the
+bodies k of its subtree carried to its own frame and projected on its axis; the same
+number is the wrench of k projected on joint i's axis carried down to k's frame, a motion
+vector (sigma_ang, sigma_lin) with tau_i = sigma_ang . n_k + sigma_lin . f_k. Carrying one
+6-vector down the tree per (joint, body) pair is far cheaper than carrying ten columns of
+wrenches up (the forward-mode derivative of the RNEA by its inertial parameters that an
+earlier version took: three times the operations, and most of a 50-link chain's build).
+Y depends on q, qd, qdd and the kinematic parameters (lengths, gravity); pi on the inertial
+and joint parameters.
 """
 
 from __future__ import annotations
@@ -30,11 +38,10 @@ import sympy as sp
 from ..manifest import regressor_names
 from ..model.merge import mass_pieces, merge_fixed_joints
 from ..model.model import ZERO3, ZERO33, Model
-from .differentiate import differentiate, needed_definitions, recorder_after
+from .differentiate import needed_definitions, recorder_after
 from .joints import jointed
 from .kinematics import CoordinateSymbols, Recorder
-from .recursive import _angular_velocities, _cross_square, _links, _rnea
-from .symbols import Internal
+from .recursive import _angular_velocities, _cross_square, _links, accelerations
 
 # (row, column) of I_O for the last six of a body's ten parameters (Pinocchio's order)
 _INERTIA_ENTRIES = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))
@@ -60,21 +67,87 @@ def derive_regressor(model: Model, coords: CoordinateSymbols | None = None,
     rec = rec or Recorder()
     given = len(rec.definitions)
     pieces = mass_pieces(model)
-    symbols = [[Internal(f"_pi{10 * i + j}") for j in range(10)] for i in range(len(pieces))]
-    links = _symbolic_links(model, coords, rec, symbols)
+    links = _bare_links(model, coords, rec)
     w = _angular_velocities(links, coords, rec)
-    tau = _rnea(links, coords, rec, w, coords.qdd, sp.Matrix(model.gravity))
-    flat = [s for body in symbols for s in body]
-    rigid = differentiate(rec.definitions, tau, flat, rec)
-    Y = sp.Matrix(rigid).row_join(_joint_columns(model, coords))
+    alpha, acc = accelerations(links, coords, rec, w, coords.qdd, sp.Matrix(model.gravity))
+    rigid = sp.zeros(model.dof, 10 * len(links))
+    children: list[list[int]] = [[] for _ in links]
+    for k, link in enumerate(links):
+        if link.parent is not None:
+            children[link.parent].append(k)
+    for i, link in enumerate(links):
+        for row, axis in _joint_axes(link):
+            stack = [(i, axis)]
+            while stack:  # joint i's axis carried down to every body of its subtree
+                k, (ang, lin) = stack.pop()
+                columns = _body_columns(ang, lin, w[k], alpha[k], acc[k], rec)
+                rigid[row, 10 * k: 10 * k + 10] = sp.Matrix([columns])
+                for child in children[k]:
+                    c = links[child]
+                    stack.append((child, (c.to_child(ang, rec),
+                                          c.to_child(lin + ang.cross(c.d), rec))))
+    Y = rigid.row_join(_joint_columns(model, coords))
     new = needed_definitions(rec.definitions, list(Y), first=given)
-    leaked = set(flat) & set().union(*(e.free_symbols for _, e in new), *(e.free_symbols for e in Y))
-    if leaked:
-        raise RuntimeError("internal error: the regressor depends on the inertial parameters")
-    pi = [v for body, parts in pieces for v in body_parameters(parts)] + joint_parameters(model)
+    pi = regressor_parameters(model)
     names = regressor_names([body.name for body, _ in pieces],
                             [joint.name for _, joint in jointed(model)])
     return Regressor(Y, pi, names, rec.definitions[:given] + new)
+
+
+KINEMATICS_PER_BODY = 24  # R (9, row-major), d, w, alpha, a, the joint axis (3 each)
+NO_JOINT, REVOLUTE, PRISMATIC, FLOATING = 0, 1, 2, 3
+
+
+@dataclass
+class RegressorKinematics:
+    """What the compiled regressor needs per moving body, in a program of named
+    intermediates, and the tree as numbers: the C function (model/regressor.c.j2) runs
+    the pair loop of `derive_regressor` over them, so the generated code grows with the
+    bodies, not with the (joint, body) pairs.
+
+    `values` holds KINEMATICS_PER_BODY expressions per body, in the order of
+    `mass_pieces`: its rotation R (the parent's components of its axes), its origin's
+    offset d from the parent's (in the parent's frame), its angular velocity w, angular
+    acceleration alpha and origin acceleration a (gravity included), in its own frame, and
+    its joint's unit axis. `parents` (-1: the world), `kinds` (NO_JOINT, REVOLUTE,
+    PRISMATIC, FLOATING) and `rows` (first velocity coordinate, -1 for none) per body;
+    `joint_rows` the velocity coordinate of each 1-dof joint (the joint columns)."""
+
+    values: list[sp.Expr]
+    parents: list[int]
+    kinds: list[int]
+    rows: list[int]
+    joint_rows: list[int]
+    intermediates: list[tuple[sp.Symbol, sp.Expr]]
+
+
+def regressor_kinematics(eqs) -> RegressorKinematics:
+    """The regressor's per-body kinematics as a continuation of `eqs`'s program."""
+    model, coords = eqs.model, eqs.coords
+    rec = recorder_after(eqs.intermediates)
+    given = len(rec.definitions)
+    links = _bare_links(model, coords, rec)
+    w = _angular_velocities(links, coords, rec)
+    alpha, acc = accelerations(links, coords, rec, w, coords.qdd, sp.Matrix(model.gravity))
+    values = []
+    for k, link in enumerate(links):
+        values += [*link.R, *link.d, *w[k], *alpha[k], *acc[k], *link.axis]
+    kinds = [NO_JOINT if link.k is None else FLOATING if link.free
+             else REVOLUTE if link.rotates else PRISMATIC for link in links]
+    new = needed_definitions(rec.definitions, values, first=given)
+    return RegressorKinematics(
+        values=values,
+        parents=[-1 if link.parent is None else link.parent for link in links],
+        kinds=kinds,
+        rows=[-1 if link.k is None else link.k for link in links],
+        joint_rows=[k for k, _ in jointed(model)],
+        intermediates=rec.definitions[:given] + new)
+
+
+def regressor_parameters(model: Model) -> list[sp.Expr]:
+    """pi, the regressor's parameters (module docstring), in the model's parameters."""
+    return [v for body, parts in mass_pieces(model) for v in body_parameters(parts)] \
+        + joint_parameters(model)
 
 
 def attach_regressor(eqs) -> None:
@@ -95,22 +168,46 @@ def with_regressor(eqs):
     return eqs
 
 
-def _symbolic_links(model: Model, coords: CoordinateSymbols, rec: Recorder, symbols):
-    """`recursive`'s links of the model with fixed joints merged away, each moving body's
-    (m, h, I_O) replaced by its ten symbols."""
+def _bare_links(model: Model, coords: CoordinateSymbols, rec: Recorder):
+    """`recursive`'s links of the model with fixed joints merged away (one per moving
+    body, in the order of `mass_pieces`), without mass: only their kinematics is used."""
     merged = merge_fixed_joints(model)
     # without mass, _links names no inertia of its own (zeros are never named)
     bare = Model(name=merged.name, parameters=merged.parameters, gravity=merged.gravity,
                  source=merged.source, bodies=tuple(replace(b, mass=sp.Integer(0), com=ZERO3,
                                                             inertia=ZERO33)
                                                     for b in merged.bodies))
-    links = []
-    for link, s in zip(_links(bare, coords, rec), symbols):
-        I_O = sp.zeros(3, 3)
-        for (r, c), value in zip(_INERTIA_ENTRIES, s[4:]):
-            I_O[r, c] = I_O[c, r] = value
-        links.append(replace(link, mass=s[0], h=sp.Matrix(s[1:4]), I_O=I_O))
-    return links
+    return _links(bare, coords, rec)
+
+
+def _joint_axes(link) -> list[tuple[int, tuple[sp.Matrix, sp.Matrix]]]:
+    """(row, (sigma_ang, sigma_lin)) per velocity coordinate of a link's joint, in its
+    frame: the joint's torque is sigma_ang . N + sigma_lin . F of the wrench (F, N) about
+    its origin. A floating joint's six rows are the wrench's components."""
+    if link.k is None:
+        return []
+    E, zero = sp.eye(3), sp.zeros(3, 1)
+    if link.free:
+        return [(link.k + r, (zero, E[:, r])) for r in range(3)] + \
+            [(link.k + 3 + r, (E[:, r], zero)) for r in range(3)]
+    if link.rotates:
+        return [(link.k, (link.axis, zero))]
+    return [(link.k, (zero, link.axis))]
+
+
+def _body_columns(ang: sp.Matrix, lin: sp.Matrix, w: sp.Matrix, alpha: sp.Matrix,
+                  a: sp.Matrix, rec: Recorder) -> list[sp.Expr]:
+    """The ten coefficients of (m, h, I_O) in ang . n + lin . f, the body's wrench (f, n)
+    about its origin (module docstring), each named."""
+    h = rec.vec(lin.cross(alpha) + w.cross(rec.vec(w.cross(lin))) + a.cross(ang))
+    b = rec.vec(ang.cross(w))
+    inertia = []
+    for r, c in _INERTIA_ENTRIES:
+        if r == c:
+            inertia.append(ang[r] * alpha[r] + b[r] * w[r])
+        else:
+            inertia.append(ang[r] * alpha[c] + ang[c] * alpha[r] + b[r] * w[c] + b[c] * w[r])
+    return [rec.name(e) for e in [lin.dot(a), *h, *inertia]]
 
 
 def _joint_columns(model: Model, coords: CoordinateSymbols) -> sp.Matrix:
