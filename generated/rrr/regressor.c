@@ -2,313 +2,264 @@
 #include "gagen_math.h"
 #include "rrr.h"
 
+/* The regressor, tau = Y pi (symbolic/regressor.py): the generated kinematics of each of
+ * the 3 moving bodies (R, d, w, alpha, a and the joint axis, 24 doubles each), then
+ * for each joint coordinate its axis carried down the joint's subtree as a motion vector
+ * (sigma_ang, sigma_lin), giving the body's ten columns of that row: O(n) generated code,
+ * O(n * depth) work. The tree as numbers: each body's parent (-1: the world), its joint's
+ * kind (0 none, 1 revolute, 2 prismatic, 3 floating) and first velocity coordinate. */
+static const int gagen_reg_parent[3] = { -1, 0, 1 };
+static const int gagen_reg_kind[3] = { 1, 1, 1 };
+static const int gagen_reg_row[3] = { 0, 1, 2 };
+static const int gagen_reg_joint_row[3] = { 0, 1, 2 };
+
+/* The axis of row r of body i's joint, as (sigma_ang, sigma_lin) in its frame. */
+static void gagen_reg_axis(int kind, int r, const double *axis, double *s)
+{
+    int c;
+    for (c = 0; c < 6; ++c)
+        s[c] = 0.0;
+    if (kind == 1)
+        for (c = 0; c < 3; ++c)
+            s[c] = axis[c];
+    else if (kind == 2)
+        for (c = 0; c < 3; ++c)
+            s[3 + c] = axis[c];
+    else if (r < 3)  /* floating: the force's components, then the moment's */
+        s[3 + r] = 1.0;
+    else
+        s[r - 3] = 1.0;
+}
+
+/* sigma of a child from its parent's: ang = R^T ang_p, lin = R^T (lin_p + ang_p x d). */
+static void gagen_reg_carry(const double *K, const double *sp, double *s)
+{
+    const double *R = K, *d = K + 9;
+    double t[3];
+    int a;
+    t[0] = sp[3] + sp[1] * d[2] - sp[2] * d[1];
+    t[1] = sp[4] + sp[2] * d[0] - sp[0] * d[2];
+    t[2] = sp[5] + sp[0] * d[1] - sp[1] * d[0];
+    for (a = 0; a < 3; ++a) {
+        s[a] = R[a] * sp[0] + R[3 + a] * sp[1] + R[6 + a] * sp[2];
+        s[3 + a] = R[a] * t[0] + R[3 + a] * t[1] + R[6 + a] * t[2];
+    }
+}
+
+/* The ten coefficients of (m, h, I_O) in sigma_ang . n + sigma_lin . f of a body's wrench
+ * (f, n) about its origin: f = m a + alpha x h + w x (w x h), n = I_O alpha + w x I_O w
+ * + h x a. */
+static void gagen_reg_columns(const double *K, const double *s, double *y)
+{
+    const double *w = K + 12, *al = K + 15, *a = K + 18, *A = s, *L = s + 3;
+    double u[3], b[3];
+    u[0] = w[1] * L[2] - w[2] * L[1];  /* w x L */
+    u[1] = w[2] * L[0] - w[0] * L[2];
+    u[2] = w[0] * L[1] - w[1] * L[0];
+    b[0] = A[1] * w[2] - A[2] * w[1];  /* A x w */
+    b[1] = A[2] * w[0] - A[0] * w[2];
+    b[2] = A[0] * w[1] - A[1] * w[0];
+    y[0] = L[0] * a[0] + L[1] * a[1] + L[2] * a[2];
+    /* L x alpha + w x (w x L) + a x A */
+    y[1] = L[1] * al[2] - L[2] * al[1] + w[1] * u[2] - w[2] * u[1] + a[1] * A[2] - a[2] * A[1];
+    y[2] = L[2] * al[0] - L[0] * al[2] + w[2] * u[0] - w[0] * u[2] + a[2] * A[0] - a[0] * A[2];
+    y[3] = L[0] * al[1] - L[1] * al[0] + w[0] * u[1] - w[1] * u[0] + a[0] * A[1] - a[1] * A[0];
+    /* I_O's entries xx, xy, yy, xz, yz, zz */
+    y[4] = A[0] * al[0] + b[0] * w[0];
+    y[5] = A[0] * al[1] + A[1] * al[0] + b[0] * w[1] + b[1] * w[0];
+    y[6] = A[1] * al[1] + b[1] * w[1];
+    y[7] = A[0] * al[2] + A[2] * al[0] + b[0] * w[2] + b[2] * w[0];
+    y[8] = A[1] * al[2] + A[2] * al[1] + b[1] * w[2] + b[2] * w[1];
+    y[9] = A[2] * al[2] + b[2] * w[2];
+}
+
+static void gagen_reg_kinematics(const double *q, const double *qd, const double *qdd,
+                                 const double *p, double *K)
+{
+    double sn0, cs0, sn1, cs1, sn2, cs2;
+    gagen_sincos2(q[0], q[1], &sn0, &cs0, &sn1, &cs1);
+    gagen_sincos(q[2], &sn2, &cs2);
+    const double t3 = cs0;
+    const double t4 = sn0;
+    const double t5 = cs1;
+    const double t6 = t5*qd[0];
+    const double t7 = sn1;
+    const double t8 = t7*qd[0];
+    const double t9 = t8;
+    const double t10 = t6;
+    const double t11 = cs2;
+    const double t12 = sn2;
+    const double t13 = t11*t9 + t12*t10;
+    const double t14 = t11*t10 - t12*t9;
+    const double t15 = qd[1] + qd[2];
+    const double t16 = -qd[0]*p[1];
+    const double t17 = qdd[0]*t7;
+    const double t18 = qdd[0]*t5;
+    const double t19 = -qdd[0]*p[1];
+    const double t20 = t7*p[0] + t16*t6;
+    const double t21 = t5*p[0] - t16*t8;
+    const double t22 = t10*qd[1] + t17;
+    const double t23 = -t9*qd[1] + t18;
+    const double t24 = -t10*p[2];
+    const double t25 = qdd[1]*p[2] - t9*t24 + t21;
+    const double t26 = qd[1]*p[2];
+    const double t27 = t10*t24 + t20 - t26*qd[1];
+    const double t28 = t11*t22 + t12*t23;
+    const double t29 = t11*t23 - t12*t22;
+    const double t30 = t9*t26 + t19 - t23*p[2];
+    const double t31 = t11*t27 + t12*t25;
+    const double t32 = t11*t25 - t12*t27;
+    const double t33 = qdd[1] + qdd[2];
+    const double t34 = t14*qd[2] + t28;
+    const double t35 = -t13*qd[2] + t29;
+    K[0] = t3;
+    K[1] = -t4;
+    K[2] = 0;
+    K[3] = t4;
+    K[4] = t3;
+    K[5] = 0;
+    K[6] = 0;
+    K[7] = 0;
+    K[8] = 1;
+    K[9] = 0;
+    K[10] = 0;
+    K[11] = 0;
+    K[12] = 0;
+    K[13] = 0;
+    K[14] = qd[0];
+    K[15] = 0;
+    K[16] = 0;
+    K[17] = qdd[0];
+    K[18] = 0;
+    K[19] = 0;
+    K[20] = p[0];
+    K[21] = 0;
+    K[22] = 0;
+    K[23] = 1;
+    K[24] = 1;
+    K[25] = 0;
+    K[26] = 0;
+    K[27] = 0;
+    K[28] = t5;
+    K[29] = -t7;
+    K[30] = 0;
+    K[31] = t7;
+    K[32] = t5;
+    K[33] = 0;
+    K[34] = p[1];
+    K[35] = 0;
+    K[36] = qd[1];
+    K[37] = t9;
+    K[38] = t10;
+    K[39] = qdd[1];
+    K[40] = t22;
+    K[41] = t23;
+    K[42] = t19;
+    K[43] = t20;
+    K[44] = t21;
+    K[45] = 1;
+    K[46] = 0;
+    K[47] = 0;
+    K[48] = 1;
+    K[49] = 0;
+    K[50] = 0;
+    K[51] = 0;
+    K[52] = t11;
+    K[53] = -t12;
+    K[54] = 0;
+    K[55] = t12;
+    K[56] = t11;
+    K[57] = 0;
+    K[58] = p[2];
+    K[59] = 0;
+    K[60] = t15;
+    K[61] = t13;
+    K[62] = t14;
+    K[63] = t33;
+    K[64] = t34;
+    K[65] = t35;
+    K[66] = t30;
+    K[67] = t31;
+    K[68] = t32;
+    K[69] = 1;
+    K[70] = 0;
+    K[71] = 0;
+}
+
 GAGEN_KERNEL
 void rrr_regressor(const double *q, const double *qd, const double *qdd,
                            const double *p, double *Y)
 {
-    double sn1, cs1, sn2, cs2;
-    gagen_sincos2(q[1], q[2], &sn1, &cs1, &sn2, &cs2);
-    const double t0 = -qd[1]*qd[1];
-    const double t4 = cs1;
-    const double t5 = t4*qd[0];
-    const double t6 = sn1;
-    const double t7 = t6*qd[0];
-    const double t8 = t7;
-    const double t9 = t8*qd[1];
-    const double t10 = t8*t8;
-    const double t11 = t5;
-    const double t12 = t11*qd[1];
-    const double t13 = t11*t11;
-    const double t14 = t8*t11;
-    const double t15 = -t14;
-    const double t16 = t12;
-    const double t17 = -t9;
-    const double t18 = cs2;
-    const double t19 = sn2;
-    const double t20 = t18*t8 + t19*t11;
-    const double t21 = t20*t20;
-    const double t22 = t18*t11 - t19*t8;
-    const double t23 = t22*t22;
-    const double t24 = t20*t22;
-    const double t25 = qd[1] + qd[2];
-    const double t26 = t22*t25;
-    const double t27 = t20*t25;
-    const double t28 = t25*t25;
-    const double t29 = -t28;
-    const double t30 = -qd[0]*p[1];
-    const double t31 = qdd[0]*t6;
-    const double t32 = qdd[0]*t4;
-    const double t33 = -qdd[0]*p[1];
-    const double t34 = t6*p[0] + t30*t5;
-    const double t35 = t4*p[0] - t30*t7;
-    const double t36 = t31 + t12;
-    const double t37 = t32 - t9;
-    const double t38 = -t37 + t9;
-    const double t39 = -t11*p[2];
-    const double t40 = qdd[1]*p[2] - t8*t39 + t35;
-    const double t41 = qd[1]*p[2];
-    const double t42 = t11*t39 + t34 - t41*qd[1];
-    const double t43 = t18*t36 + t19*t37;
-    const double t44 = t18*t37 - t19*t36;
-    const double t45 = t8*t41 + t33 - t37*p[2];
-    const double t46 = t18*t45;
-    const double t47 = t18*t42 + t19*t40;
-    const double t48 = -t47;
-    const double t49 = t18*t40 - t19*t42;
-    const double t50 = t18*t49 + t19*t47;
-    const double t51 = qdd[1] + qdd[2];
-    const double t52 = -t51 + t24;
-    const double t53 = t22*qd[2] + t43;
-    const double t54 = -t53 + t26;
-    const double t55 = -t20*qd[2] + t44;
-    const double t56 = -t55 + t27;
-    const double t57 = -t10 - t13;
-    const double t58 = t36 + t12;
-    const double t59 = t38;
-    const double t60 = t36 - t12;
-    const double t61 = t15;
-    const double t62 = t10 - t13;
-    const double t63 = t37 + t9;
-    const double t64 = t14;
-    const double t65 = qdd[1] + t14;
-    const double t66 = t0 + t13;
-    const double t67 = -t38;
-    const double t68 = -t12;
-    const double t69 = -t0 - t10;
-    const double t70 = qdd[1] + t15;
-    const double t71 = t9;
-    const double t72 = -t21 - t23;
-    const double t73 = t53 + t26;
-    const double t74 = t56;
-    const double t75 = -t23 - t28;
-    const double t76 = t52;
-    const double t77 = t55 + t27;
-    const double t78 = t51 + t24;
-    const double t79 = t78*t18;
-    const double t80 = -t21 - t28;
-    const double t81 = t54;
-    const double t82 = -t54;
-    const double t83 = -t24;
-    const double t84 = t21 - t23;
-    const double t85 = t24;
-    const double t86 = t26;
-    const double t87 = t23 + t29;
-    const double t88 = -t56;
-    const double t89 = -t26;
-    const double t90 = -t27;
-    const double t91 = -t21 - t29;
-    const double t92 = -t52;
-    const double t93 = t27;
-    const double t94 = t75*t19 + t79;
-    const double t95 = t76*t19 + t80*t18;
-    const double t96 = t77*t19 + t81*t18;
-    const double t97 = t50;
-    const double t98 = t86*t18 - t90*t19;
-    const double t99 = -t91*t19 + t79;
-    const double t100 = t87*t18 - t92*t19;
-    const double t101 = -t73*t19 + t88*t18;
-    const double t102 = t89*t18 - t19*t55;
-    const double t103 = -t50;
-    const double t104 = t46;
-    const double t105 = -t93*t19 + t18*t53;
-    const double t106 = t19*t45;
-    const double t107 = t86*t19 + t90*t18;
-    const double t108 = t78*t19 + t91*t18;
-    const double t109 = t87*t19 + t92*t18;
-    const double t110 = t73*t18 + t88*t19;
-    const double t111 = t89*t19 + t18*t55;
-    const double t112 = t18*t47 - t19*t49;
-    const double t113 = t93*t18 + t19*t53;
-    const double t114 = -t46;
-    const double t115 = t94*p[2] + t49;
-    const double t116 = t95*p[2] + t48;
-    const double t117 = t96*p[2];
-    const double t118 = t97*p[2];
-    const double t119 = -t72*p[2] + t112;
-    const double t120 = -t73*p[2] + t106;
-    const double t121 = -t74*p[2] + t114;
-    const double t122 = -t45*p[2];
-    const double t123 = t16*t6 + t17*t4;
-    const double t124 = t65*t6 + t69*t4;
-    const double t125 = t66*t6 + t70*t4;
-    const double t126 = t58*t4 + t67*t6;
-    const double t127 = t68*t6 + t4*t37;
-    const double t128 = t4*t34 - t6*t35;
-    const double t129 = t6*t33;
-    const double t130 = t71*t4 + t6*t36;
-    const double t131 = t98*t6 + t107*t4;
-    const double t132 = t99*t6 + t108*t4;
-    const double t133 = t100*t6 + t109*t4;
-    const double t134 = t101*t6 + t110*t4;
-    const double t135 = t102*t6 + t111*t4;
-    const double t136 = t103*t6 + t119*t4;
-    const double t137 = t104*t6 + t120*t4;
-    const double t138 = t105*t6 + t113*t4;
-    const double t139 = t106*t6 + t121*t4;
-    const double t140 = -t4*t33;
-    const double t141 = t122*t4;
-    const double t142 = -t57*p[1] + t128;
-    const double t143 = -t58*p[1] + t129;
-    const double t144 = -t59*p[1] + t140;
-    const double t145 = -t33*p[1];
-    const double t146 = -t72*p[1] + t136;
-    const double t147 = -t73*p[1] + t137;
-    const double t148 = -t74*p[1] + t139;
-    const double t149 = t141 - t45*p[1];
-    Y[0] = 0;
-    Y[1] = 0;
-    Y[2] = 0;
-    Y[3] = 0;
-    Y[4] = 0;
-    Y[5] = 0;
-    Y[6] = 0;
-    Y[7] = 0;
-    Y[8] = 0;
-    Y[9] = qdd[0];
-    Y[10] = t145;
-    Y[11] = t142;
-    Y[12] = t144;
-    Y[13] = t143;
-    Y[14] = t123;
-    Y[15] = t124;
-    Y[16] = t130;
-    Y[17] = t125;
-    Y[18] = t126;
-    Y[19] = t127;
-    Y[20] = t149;
-    Y[21] = t146;
-    Y[22] = t148;
-    Y[23] = t147;
-    Y[24] = t131;
-    Y[25] = t132;
-    Y[26] = t138;
-    Y[27] = t133;
-    Y[28] = t134;
-    Y[29] = t135;
-    Y[30] = qd[0];
-    Y[31] = 0;
-    Y[32] = 0;
-    Y[33] = gagen_sign(qd[0]);
-    Y[34] = 0;
-    Y[35] = 0;
-    Y[36] = qdd[0];
-    Y[37] = 0;
-    Y[38] = 0;
-    Y[39] = 0;
-    Y[40] = 0;
-    Y[41] = 0;
-    Y[42] = 0;
-    Y[43] = 0;
-    Y[44] = 0;
-    Y[45] = 0;
-    Y[46] = 0;
-    Y[47] = 0;
-    Y[48] = 0;
-    Y[49] = 0;
-    Y[50] = 0;
-    Y[51] = t35;
-    Y[52] = -t34;
-    Y[53] = qdd[1];
-    Y[54] = t60;
-    Y[55] = t61;
-    Y[56] = t63;
-    Y[57] = t62;
-    Y[58] = t64;
-    Y[59] = t118;
-    Y[60] = t117;
-    Y[61] = t115;
-    Y[62] = t116;
-    Y[63] = t51;
-    Y[64] = t82;
-    Y[65] = t83;
-    Y[66] = t77;
-    Y[67] = t84;
-    Y[68] = t85;
-    Y[69] = 0;
-    Y[70] = qd[1];
-    Y[71] = 0;
-    Y[72] = 0;
-    Y[73] = gagen_sign(qd[1]);
-    Y[74] = 0;
-    Y[75] = 0;
-    Y[76] = qdd[1];
-    Y[77] = 0;
-    Y[78] = 0;
-    Y[79] = 0;
-    Y[80] = 0;
-    Y[81] = 0;
-    Y[82] = 0;
-    Y[83] = 0;
-    Y[84] = 0;
-    Y[85] = 0;
-    Y[86] = 0;
-    Y[87] = 0;
-    Y[88] = 0;
-    Y[89] = 0;
-    Y[90] = 0;
-    Y[91] = 0;
-    Y[92] = 0;
-    Y[93] = 0;
-    Y[94] = 0;
-    Y[95] = 0;
-    Y[96] = 0;
-    Y[97] = 0;
-    Y[98] = 0;
-    Y[99] = 0;
-    Y[100] = t49;
-    Y[101] = t48;
-    Y[102] = t51;
-    Y[103] = t82;
-    Y[104] = t83;
-    Y[105] = t77;
-    Y[106] = t84;
-    Y[107] = t85;
-    Y[108] = 0;
-    Y[109] = 0;
-    Y[110] = qd[2];
-    Y[111] = 0;
-    Y[112] = 0;
-    Y[113] = gagen_sign(qd[2]);
-    Y[114] = 0;
-    Y[115] = 0;
-    Y[116] = qdd[2];
+    double K[72], sigma[18];
+    int inside[3];
+    int i, k, r, rows, parent;
+    long row;
+    gagen_reg_kinematics(q, qd, qdd, p, K);
+    for (k = 0; k < 117; ++k)
+        Y[k] = 0.0;
+    for (i = 0; i < 3; ++i) {
+        rows = gagen_reg_kind[i] == 3 ? 6 : gagen_reg_kind[i] == 0 ? 0 : 1;
+        for (r = 0; r < rows; ++r) {
+            row = (long)(gagen_reg_row[i] + r) * 39;
+            gagen_reg_axis(gagen_reg_kind[i], r, K + 24 * i + 21, sigma + 6 * i);
+            inside[i] = 1;
+            gagen_reg_columns(K + 24 * i, sigma + 6 * i, Y + row + 10 * i);
+            /* the bodies after i whose parent is in i's subtree (parents come first) */
+            for (k = i + 1; k < 3; ++k) {
+                parent = gagen_reg_parent[k];
+                inside[k] = parent >= i && inside[parent];
+                if (!inside[k])
+                    continue;
+                gagen_reg_carry(K + 24 * k, sigma + 6 * parent, sigma + 6 * k);
+                gagen_reg_columns(K + 24 * k, sigma + 6 * k, Y + row + 10 * k);
+            }
+        }
+    }
+    /* the joint terms: damping qd, friction sign(qd), armature qdd in the joint's row */
+    for (k = 0; k < 3; ++k) {
+        row = (long)gagen_reg_joint_row[k] * 39 + 30;
+        Y[row + k] = qd[gagen_reg_joint_row[k]];
+        Y[row + 3 + k] = gagen_sign(qd[gagen_reg_joint_row[k]]);
+        Y[row + 6 + k] = qdd[gagen_reg_joint_row[k]];
+    }
+    (void)p;
 }
 
 void rrr_regressor_parameters(const double *p, double *pi)
 {
-    const double t1 = (1.0/4.0)*p[1]*p[1]*p[4];
-    const double t2 = (1.0/4.0)*p[2]*p[2]*p[5];
-    const double t3 = (1.0/4.0)*p[3]*p[3]*p[6];
+    const double t0 = (1.0/4.0)*p[1]*p[1]*p[4];
+    const double t1 = (1.0/4.0)*p[2]*p[2]*p[5];
+    const double t2 = (1.0/4.0)*p[3]*p[3]*p[6];
     pi[0] = p[4];
     pi[1] = 0;
     pi[2] = (1.0/2.0)*p[1]*p[4];
     pi[3] = 0;
-    pi[4] = t1 + p[7];
+    pi[4] = t0 + p[7];
     pi[5] = 0;
     pi[6] = p[8];
     pi[7] = 0;
     pi[8] = 0;
-    pi[9] = t1 + p[9];
+    pi[9] = t0 + p[9];
     pi[10] = p[5];
     pi[11] = 0;
     pi[12] = (1.0/2.0)*p[2]*p[5];
     pi[13] = 0;
-    pi[14] = t2 + p[10];
+    pi[14] = t1 + p[10];
     pi[15] = 0;
     pi[16] = p[11];
     pi[17] = 0;
     pi[18] = 0;
-    pi[19] = t2 + p[12];
+    pi[19] = t1 + p[12];
     pi[20] = p[6];
     pi[21] = 0;
     pi[22] = (1.0/2.0)*p[3]*p[6];
     pi[23] = 0;
-    pi[24] = t3 + p[13];
+    pi[24] = t2 + p[13];
     pi[25] = 0;
     pi[26] = p[14];
     pi[27] = 0;
     pi[28] = 0;
-    pi[29] = t3 + p[15];
+    pi[29] = t2 + p[15];
     pi[30] = 0;
     pi[31] = 0;
     pi[32] = 0;
