@@ -75,7 +75,7 @@ def _slug(name: str) -> str:
 def build_row(name: str, cache_dir: Path) -> tuple[dict, object]:
     """Build one model cold, in a fresh process, into `cache_dir`; its row (build columns
     only) and its dynamics, loaded from that cache entry."""
-    from ..build.builder import import_extension
+    from ..build.builder import import_extension, load_derivative_module
     from ..model.resolve import resolve_model
     from ..runtime.compiled import CompiledDynamics
     from .coldbuild import measured_build
@@ -85,8 +85,10 @@ def build_row(name: str, cache_dir: Path) -> tuple[dict, object]:
     nan = float("nan")
     stages = report["stages"]
     start = time.perf_counter()
+    # its derivative module, should a later section need it, built into the same cache
     dyn = CompiledDynamics(import_extension(Path(report["module"]), report["module_name"]),
-                           model)
+                           model, derivatives=lambda _: load_derivative_module(
+                               model, cache_dir=cache_dir))
     row = {key: nan for key in COLUMNS}
     row.update({
         "model": display_name(name, model),
