@@ -13,64 +13,74 @@ static const int gagen_reg_kind[3] = { 1, 1, 1 };
 static const int gagen_reg_row[3] = { 0, 1, 2 };
 static const int gagen_reg_joint_row[3] = { 0, 1, 2 };
 
+/* The helpers read their inputs into locals first and take restrict pointers: sigma is
+ * written by one call and read by the next, and without them every store forces the
+ * compiler to reload (measured: the Panda's regressor 4.5 us -> ~1 us per state). */
+
 /* The axis of row r of body i's joint, as (sigma_ang, sigma_lin) in its frame. */
-static void gagen_reg_axis(int kind, int r, const double *axis, double *s)
+static inline void gagen_reg_axis(int kind, int r, const double *restrict axis,
+                                  double *restrict s)
 {
+    const double x = axis[0], y = axis[1], z = axis[2];
     int c;
     for (c = 0; c < 6; ++c)
         s[c] = 0.0;
-    if (kind == 1)
-        for (c = 0; c < 3; ++c)
-            s[c] = axis[c];
-    else if (kind == 2)
-        for (c = 0; c < 3; ++c)
-            s[3 + c] = axis[c];
-    else if (r < 3)  /* floating: the force's components, then the moment's */
+    if (kind == 1) {
+        s[0] = x;
+        s[1] = y;
+        s[2] = z;
+    } else if (kind == 2) {
+        s[3] = x;
+        s[4] = y;
+        s[5] = z;
+    } else if (r < 3) {  /* floating: the force's components, then the moment's */
         s[3 + r] = 1.0;
-    else
+    } else {
         s[r - 3] = 1.0;
+    }
 }
 
 /* sigma of a child from its parent's: ang = R^T ang_p, lin = R^T (lin_p + ang_p x d). */
-static void gagen_reg_carry(const double *K, const double *sp, double *s)
+static inline void gagen_reg_carry(const double *restrict K, const double *restrict sp,
+                                   double *restrict s)
 {
     const double *R = K, *d = K + 9;
-    double t[3];
-    int a;
-    t[0] = sp[3] + sp[1] * d[2] - sp[2] * d[1];
-    t[1] = sp[4] + sp[2] * d[0] - sp[0] * d[2];
-    t[2] = sp[5] + sp[0] * d[1] - sp[1] * d[0];
-    for (a = 0; a < 3; ++a) {
-        s[a] = R[a] * sp[0] + R[3 + a] * sp[1] + R[6 + a] * sp[2];
-        s[3 + a] = R[a] * t[0] + R[3 + a] * t[1] + R[6 + a] * t[2];
-    }
+    const double a0 = sp[0], a1 = sp[1], a2 = sp[2];
+    const double t0 = sp[3] + a1 * d[2] - a2 * d[1];
+    const double t1 = sp[4] + a2 * d[0] - a0 * d[2];
+    const double t2 = sp[5] + a0 * d[1] - a1 * d[0];
+    s[0] = R[0] * a0 + R[3] * a1 + R[6] * a2;
+    s[1] = R[1] * a0 + R[4] * a1 + R[7] * a2;
+    s[2] = R[2] * a0 + R[5] * a1 + R[8] * a2;
+    s[3] = R[0] * t0 + R[3] * t1 + R[6] * t2;
+    s[4] = R[1] * t0 + R[4] * t1 + R[7] * t2;
+    s[5] = R[2] * t0 + R[5] * t1 + R[8] * t2;
 }
 
 /* The ten coefficients of (m, h, I_O) in sigma_ang . n + sigma_lin . f of a body's wrench
  * (f, n) about its origin: f = m a + alpha x h + w x (w x h), n = I_O alpha + w x I_O w
  * + h x a. */
-static void gagen_reg_columns(const double *K, const double *s, double *y)
+static inline void gagen_reg_columns(const double *restrict K, const double *restrict s,
+                                     double *restrict y)
 {
-    const double *w = K + 12, *al = K + 15, *a = K + 18, *A = s, *L = s + 3;
-    double u[3], b[3];
-    u[0] = w[1] * L[2] - w[2] * L[1];  /* w x L */
-    u[1] = w[2] * L[0] - w[0] * L[2];
-    u[2] = w[0] * L[1] - w[1] * L[0];
-    b[0] = A[1] * w[2] - A[2] * w[1];  /* A x w */
-    b[1] = A[2] * w[0] - A[0] * w[2];
-    b[2] = A[0] * w[1] - A[1] * w[0];
-    y[0] = L[0] * a[0] + L[1] * a[1] + L[2] * a[2];
+    const double w0 = K[12], w1 = K[13], w2 = K[14];
+    const double l0 = K[15], l1 = K[16], l2 = K[17];  /* alpha */
+    const double a0 = K[18], a1 = K[19], a2 = K[20];
+    const double A0 = s[0], A1 = s[1], A2 = s[2], L0 = s[3], L1 = s[4], L2 = s[5];
+    const double u0 = w1 * L2 - w2 * L1, u1 = w2 * L0 - w0 * L2, u2 = w0 * L1 - w1 * L0;
+    const double b0 = A1 * w2 - A2 * w1, b1 = A2 * w0 - A0 * w2, b2 = A0 * w1 - A1 * w0;
+    y[0] = L0 * a0 + L1 * a1 + L2 * a2;
     /* L x alpha + w x (w x L) + a x A */
-    y[1] = L[1] * al[2] - L[2] * al[1] + w[1] * u[2] - w[2] * u[1] + a[1] * A[2] - a[2] * A[1];
-    y[2] = L[2] * al[0] - L[0] * al[2] + w[2] * u[0] - w[0] * u[2] + a[2] * A[0] - a[0] * A[2];
-    y[3] = L[0] * al[1] - L[1] * al[0] + w[0] * u[1] - w[1] * u[0] + a[0] * A[1] - a[1] * A[0];
+    y[1] = L1 * l2 - L2 * l1 + w1 * u2 - w2 * u1 + a1 * A2 - a2 * A1;
+    y[2] = L2 * l0 - L0 * l2 + w2 * u0 - w0 * u2 + a2 * A0 - a0 * A2;
+    y[3] = L0 * l1 - L1 * l0 + w0 * u1 - w1 * u0 + a0 * A1 - a1 * A0;
     /* I_O's entries xx, xy, yy, xz, yz, zz */
-    y[4] = A[0] * al[0] + b[0] * w[0];
-    y[5] = A[0] * al[1] + A[1] * al[0] + b[0] * w[1] + b[1] * w[0];
-    y[6] = A[1] * al[1] + b[1] * w[1];
-    y[7] = A[0] * al[2] + A[2] * al[0] + b[0] * w[2] + b[2] * w[0];
-    y[8] = A[1] * al[2] + A[2] * al[1] + b[1] * w[2] + b[2] * w[1];
-    y[9] = A[2] * al[2] + b[2] * w[2];
+    y[4] = A0 * l0 + b0 * w0;
+    y[5] = A0 * l1 + A1 * l0 + b0 * w1 + b1 * w0;
+    y[6] = A1 * l1 + b1 * w1;
+    y[7] = A0 * l2 + A2 * l0 + b0 * w2 + b2 * w0;
+    y[8] = A1 * l2 + A2 * l1 + b1 * w2 + b2 * w1;
+    y[9] = A2 * l2 + b2 * w2;
 }
 
 static void gagen_reg_kinematics(const double *q, const double *qd, const double *qdd,

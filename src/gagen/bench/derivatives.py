@@ -104,14 +104,23 @@ def pinocchio_candidates(label: str, dyn, pm, q, qd, qdd, tau) -> list[Candidate
         "RNEA": dyn.inverse_dynamics_derivatives(q, qd, qdd),
         "C": (dyn.coriolis_matrix(q, qd),),
     }
-    theirs = {
-        "ABA": pin.computeABADerivatives(pm, data, pq, pqd, ptau),
-        "RNEA": pin.computeRNEADerivatives(pm, data, pq, pqd, pqdd),
-        "C": (pin.computeCoriolisMatrix(pm, data, pq, pqd),),
-    }
+    # Pinocchio's derivatives leave out the URDF's joint damping and friction (gagen's
+    # dynamics have them): its aba sees tau less those forces, and the damping adds
+    # diag(damping) to dtau/dqd and -M^-1 diag(damping) to dqdd/dqd (friction's sign(qd)
+    # has no derivative)
+    forces = peers.joint_forces(pm, qd)
+    damping = np.diag(peers.from_pinocchio(pm, pm.damping))
+    (ptau_rigid,) = peers.to_pinocchio(pm, np.asarray(tau, float) - forces)
+    aba = [_from_pinocchio(pm, np.array(v))
+           for v in pin.computeABADerivatives(pm, data, pq, pqd, ptau_rigid)]
+    aba[1] = aba[1] - aba[2] @ damping
+    rnea = [_from_pinocchio(pm, np.array(v))
+            for v in pin.computeRNEADerivatives(pm, data, pq, pqd, pqdd)]
+    rnea[1] = rnea[1] + damping
+    theirs = {"ABA": aba, "RNEA": rnea,
+              "C": [_from_pinocchio(pm, np.array(pin.computeCoriolisMatrix(pm, data, pq, pqd)))]}
     for key, values in theirs.items():
-        _agree(f"{label}: gagen and Pinocchio ({key})", mine[key],
-               [_from_pinocchio(pm, np.array(v)) for v in values])
+        _agree(f"{label}: gagen and Pinocchio ({key})", mine[key], values)
     return [
         _candidate("forward dynamics derivatives", "Pinocchio",
                    "pinocchio.computeABADerivatives(model, data, q, v, tau)",
