@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict, dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -67,6 +68,14 @@ class ModelInfo:
     # the moving bodies (fixed ones merged in), in coordinate order: the regressor's
     # columns are named after them
     moving_bodies: tuple[str, ...] = ()
+
+    @cached_property
+    def frame_indices(self) -> dict[str, int]:
+        """Frame name -> index in `frames` (looked up on every frame call)."""
+        indices: dict[str, int] = {}
+        for k, (name, _, _) in enumerate(self.frames):
+            indices.setdefault(name, k)
+        return indices
 
     @property
     def coordinates(self) -> list[str]:

@@ -64,7 +64,11 @@ def scaling_models(full: bool = False, urdf_dir=None) -> tuple[list[str], list[s
 
 
 def display_name(name: str, model) -> str:
-    return name if name.startswith("chain:") else model.name
+    """A built-in's name, a file's stem (Talos reduced and full share their robot name)."""
+    if name.startswith("chain:") or not (name.endswith((".urdf", ".xml", ".yaml", ".yml"))
+                                         or "/" in name):
+        return name
+    return Path(name).stem
 
 
 def _slug(name: str) -> str:

@@ -30,9 +30,9 @@ def frame_index(info: ModelInfo, frame) -> int:
             return int(frame)
         raise KeyError(f"frame index {frame} out of range (the model has "
                        f"{len(info.frames)} frames)")
-    for k, (name, _, _) in enumerate(info.frames):
-        if name == frame:
-            return k
+    index = info.frame_indices.get(frame) if isinstance(frame, str) else None
+    if index is not None:
+        return index
     names = [name for name, _, _ in info.frames]
     shown = ", ".join(names[:12]) + (", ..." if len(names) > 12 else "")
     raise KeyError(f"unknown frame {frame!r} (frames: {shown}; all in dyn.frames)")
