@@ -107,6 +107,12 @@ class DerivativeEquations:
 
 def derive_derivatives(eqs: Equations) -> DerivativeEquations:
     """The derivative kernels of `eqs` as a continuation of its program (module docstring)."""
+    if eqs.nq != eqs.n:
+        # q holds a quaternion: derivatives by its nq entries are not Pinocchio's tangent
+        # derivatives (by the nv velocity directions), and the split below would mix them
+        raise NotImplementedError(
+            f"model '{eqs.model.name}': the derivatives of a floating base (q holds a "
+            "quaternion) are not there yet; they are for models with one q entry per velocity")
     start = time.perf_counter()
     n, c = eqs.n, eqs.coords
     rec = recorder_after(eqs.intermediates)
