@@ -133,11 +133,14 @@ def timing_rows(candidates: list[Candidate], runs: int, samples: int, repeats: i
 
 def dask_rows(dyn, runs: int, chunks: int, repeats: int, local_median: float) -> list[dict]:
     """The paper batch on a 2-process LocalCluster in `chunks` chunks: time and overhead."""
+    import logging
+
     from distributed import Client, LocalCluster
 
     work = paper_workload(dyn, runs)
+    # the cluster's own INFO lines would bury the bench's progress
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                      dashboard_address=None) as cluster, Client(cluster) as client:
+                      dashboard_address=None, silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
         def batch():
             return simulate_batch(*work["args"], client=client, chunk_size=-(-runs // chunks),
                                   **work["kwargs"])
