@@ -445,17 +445,47 @@ def test_a_derivative_module_of_other_equations_is_refused():
     np.testing.assert_array_equal(fresh.coriolis_matrix(q, q), rrr.coriolis_matrix(q, q))
 
 
-def test_the_derivatives_of_a_floating_base_are_refused_clearly():
-    """q holds a quaternion there (nq > nv): derivatives by q's entries are not the tangent
-    derivatives users expect, so both backends refuse them, before any C is written and
-    before the lambdify backend returns a wrong split of its Jacobian."""
-    model = resolve_model(str(SHARED_URDF / "double_pendulum.urdf"), floating_base=True)
-    with pytest.raises(NotImplementedError, match="floating base"):
-        derive_derivatives(derive_equations(model))
-    lam = gagen.load(model, backend="lambdify")
-    q, v = lam.neutral(), np.zeros(lam.nv)
-    with pytest.raises(NotImplementedError, match="floating base"):
-        lam.inverse_dynamics_derivatives(q, v, v)
+@pytest.mark.parametrize("backend", ["lambdify", "compiled"])
+def test_floating_base_derivatives_match_pinocchio(backend, tmp_path):
+    """A random floating tree (the quaternion in q): d/dq along the velocity directions,
+    as Pinocchio's computeRNEADerivatives and computeABADerivatives take it, to 1e-9;
+    C qd = b; the stacked call gives the single calls' numbers."""
+    pin = pytest.importorskip("pinocchio")
+    from test_floating import Reference, close, floating_tree, random_state
+
+    from gagen.model.numeric import numeric_model
+    from gagen.reference.pinocchio import pinocchio_model
+
+    model = floating_tree(3, bodies=4)
+    options = {"cache_dir": tmp_path} if backend == "compiled" else {}
+    dyn = gagen.load(model, backend=backend, **options)
+    ref = Reference(dyn, pinocchio_model(numeric_model(model)))
+    m, d = ref.model, ref.data
+    order = np.ix_(ref.v_order, ref.v_order)
+    rng = np.random.default_rng(5)
+    states = [random_state(dyn, rng) for _ in range(2)]
+    for q, v, a in states:
+        qp, vp, ap = ref.q(q), ref.v(v), ref.v(a)
+        dq, dv, _ = (np.array(x) for x in pin.computeRNEADerivatives(m, d, qp, vp, ap))
+        ours = dyn.inverse_dynamics_derivatives(q, v, a)
+        close(ours[0], dq[order], "dtau/dq")
+        close(ours[1], dv[order], "dtau/dqd")
+        tau = dyn.inverse_dynamics(q, v, a)
+        fd = pin.computeABADerivatives(m, d, qp, vp, ref.v(tau))
+        for mine, theirs, what in zip(dyn.forward_dynamics_derivatives(q, v, tau), fd,
+                                      ("dqdd/dq", "dqdd/dqd", "M^-1")):
+            theirs = np.array(theirs)
+            if what == "M^-1":  # Pinocchio fills its upper triangle
+                theirs = np.triu(theirs) + np.triu(theirs, 1).T
+            close(mine, theirs[order], what)
+        close(dyn.coriolis_matrix(q, v) @ v,
+              dyn.inverse_dynamics(q, v, np.zeros(dyn.nv)) - dyn.gravity(q), "C qd = b")
+        A, B = dyn.linearize(q, v, tau)
+        assert A.shape == (2 * dyn.nv, 2 * dyn.nv) and B.shape == (2 * dyn.nv, dyn.nv)
+    Q, V, Acc = (np.array(x) for x in zip(*states))
+    stacked = dyn.inverse_dynamics_derivatives(Q, V, Acc)
+    np.testing.assert_allclose(stacked[0][1], dyn.inverse_dynamics_derivatives(*states[1])[0],
+                               rtol=1e-13, atol=1e-13)
 
 
 def test_derivative_sources_are_identical_across_hash_seeds(tmp_path):

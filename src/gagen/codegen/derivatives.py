@@ -137,10 +137,6 @@ def generate_derivatives(deq: DerivativeEquations, module_name: str, key: str,
     carries it, so the runtime pairs the two modules of the same equations only."""
     config = config or CodegenConfig()
     eqs = deq.equations
-    if eqs.nq != eqs.n:
-        raise NotImplementedError(
-            f"model '{eqs.model.name}': the derivatives of a floating base (q holds a "
-            "quaternion) are not there yet; they are for models with one q entry per velocity")
     ident = c_identifier(eqs.model.name)
     definitions, outputs = derivative_program(deq)
     cse = CSEResult(eqs, eqs.derivation == "gibbs-appell" if config.cse is None

@@ -63,10 +63,6 @@ class CompiledDynamics(Dynamics):
         """Find or build the derivative module now, and bind its methods."""
         if self.derivative_module is not None:
             return
-        if self.nq != self.nv:
-            raise NotImplementedError(
-                "the derivatives of a floating base (q holds a quaternion) are not there yet; "
-                "they are for models with one q entry per velocity")
         if self._derivatives is None:
             raise RuntimeError(
                 "this dynamics object was made from a module alone, without a way to find or "

@@ -57,6 +57,7 @@ import sympy as sp
 
 from .differentiate import differentiate, needed_definitions, recorder_after
 from .gibbs_appell import Equations
+from .kinematics import Recorder, quaternion_rotation
 
 
 @dataclass
@@ -106,25 +107,51 @@ class DerivativeEquations:
 
 
 def derive_derivatives(eqs: Equations) -> DerivativeEquations:
-    """The derivative kernels of `eqs` as a continuation of its program (module docstring)."""
-    if eqs.nq != eqs.n:
-        # q holds a quaternion: derivatives by its nq entries are not Pinocchio's tangent
-        # derivatives (by the nv velocity directions), and the split below would mix them
-        raise NotImplementedError(
-            f"model '{eqs.model.name}': the derivatives of a floating base (q holds a "
-            "quaternion) are not there yet; they are for models with one q entry per velocity")
+    """The derivative kernels of `eqs` as a continuation of its program (module docstring).
+
+    With a floating joint (q holds a quaternion, nq > n), d tau / d q is taken along the n
+    velocity directions, as Pinocchio's derivatives are: d/de tau(q (+) e v_j) at e = 0,
+    the Jacobian by q's nq entries times the tangent map G(q) (`tangent_map`)."""
     start = time.perf_counter()
-    n, c = eqs.n, eqs.coords
+    n, nq, c = eqs.n, eqs.nq, eqs.coords
     rec = recorder_after(eqs.intermediates)
     jacobian = differentiate(eqs.intermediates, list(eqs.inverse_dynamics), c.q + c.qd, rec)
     db_dqd = differentiate(eqs.intermediates, list(eqs.velocity_terms), c.qd, rec)
+    by_q = [row[:nq] for row in jacobian]
+    if nq != n:
+        columns = tangent_map(eqs.model, c.q, rec)
+        by_q = [[rec.name(sp.Add(*(row[r] * g for r, g in columns[j] if row[r] != 0)))
+                 for j in range(n)] for row in by_q]
     half = sp.Rational(1, 2)
     derivatives = DerivativeEquations(
         equations=eqs,
         intermediates=rec.definitions,
-        dtau_dq=[row[j] for row in jacobian for j in range(n)],
-        dtau_dqd=[row[n + j] for row in jacobian for j in range(n)],
+        dtau_dq=[e for row in by_q for e in row],
+        dtau_dqd=[row[nq + j] for row in jacobian for j in range(n)],
         coriolis=[half * e for row in db_dqd for e in row],
     )
     derivatives.seconds = time.perf_counter() - start
     return derivatives
+
+
+def tangent_map(model, q: list[sp.Symbol], rec: Recorder) -> list[list[tuple[int, sp.Expr]]]:
+    """G(q) = d (q (+) v) / d v at v = 0, column by column: for each velocity coordinate j,
+    the (entry of q, derivative) pairs. A 1-dof joint's coordinate moves its own entry of q;
+    a floating joint's linear velocity (in its frame) moves the position by R(quaternion),
+    and its angular velocity w the quaternion by 1/2 quaternion (x) (w, 0), as
+    `gagen.runtime.manifold.configuration_rate` (and Pinocchio's `integrate`) do."""
+    columns: list[list[tuple[int, sp.Expr]]] = [[] for _ in range(model.dof)]
+    for body in model.moving_bodies:
+        iq, iv = model.indices()[body.name]
+        if not body.joint.floating:
+            columns[iv] = [(iq, sp.Integer(1))]
+            continue
+        quaternion = q[iq + 3: iq + 7]
+        R = quaternion_rotation(quaternion, rec)
+        for k in range(3):
+            columns[iv + k] = [(iq + r, R[r, k]) for r in range(3)]
+        x, y, z, s = quaternion
+        half = sp.Rational(1, 2)
+        for k, rates in enumerate(((s, z, -y, -x), (-z, s, x, -y), (y, -x, s, -z))):
+            columns[iv + 3 + k] = [(iq + 3 + r, half * e) for r, e in enumerate(rates)]
+    return columns
