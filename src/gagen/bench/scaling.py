@@ -164,6 +164,10 @@ def scaling_rows(models, cache_dir, repeats: int = REPEATS, target: float = DEFA
     under its name in `models`. With `cpp`, Pinocchio's algorithms are also timed in C++
     over stacked states (gagen.bench.pinocchio_cpp), the peer of the batched loop.
     """
+    from ..model.resolve import resolve_model
+
+    for name in models:  # a wrong name fails now, not after minutes of building the others
+        resolve_model(name)
     harness, why = (None, "")
     if cpp:
         from .pinocchio_cpp import build_harness
@@ -192,7 +196,9 @@ def scaling_rows(models, cache_dir, repeats: int = REPEATS, target: float = DEFA
             progress(f"{row['model']:<14} per call FD {row['fd_us']:.2f} µs (Pinocchio "
                      f"{row['pin_fd_us']:.2f}), ID {row['id_us']:.2f} ({row['pin_id_us']:.2f}), "
                      f"M {row['M_us']:.2f} ({row['pin_M_us']:.2f}); batched per state FD "
-                     f"{row['fd_state_us']:.2f} (C++ {row['cpp_fd_us']:.2f})")
+                     f"{row['fd_state_us']:.2f} (C++ {row['cpp_fd_us']:.2f}), ID "
+                     f"{row['id_state_us']:.2f} ({row['cpp_id_us']:.2f}), M "
+                     f"{row['M_state_us']:.2f} ({row['cpp_M_us']:.2f})")
         rows.append(row)
         if loaded is not None:
             loaded[name] = dyn
