@@ -3,7 +3,7 @@
 For each model: the derivation time of each (the old one in a subprocess, given up after
 `--old-timeout` seconds), and its size as `sympy.count_ops` summed over the intermediates
 and the outputs. For the models in `--build`, a cold build of the recursive equations
-through `gagen.build.builder.build` (its `derive` swapped for `derive_recursive`, into a
+through `gagen.building.builder.build` (its `derive` swapped for `derive_recursive`, into a
 fresh cache folder): generate (which includes CSE) and compile seconds, operations before
 and after CSE.
 
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import sympy as sp
 
-from gagen.build import builder
+from gagen.building import builder
 from gagen.errors import ModelError
 from gagen.model.resolve import resolve_model
 from gagen.symbolic.gibbs_appell import derive

@@ -13,7 +13,7 @@ from interrupting import seconds_to_stop
 
 import gagen
 from gagen import ComputedTorque, Eq11Trajectory
-from gagen.build.cache import cached_module_is_intact, install_received_module
+from gagen.building.cache import cached_module_is_intact, install_received_module
 from gagen.sim.distributed import ModulePayload
 
 N = 6

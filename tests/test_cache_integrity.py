@@ -16,8 +16,8 @@ import warnings
 import pytest
 
 import gagen
-from gagen.build import builder, cache
-from gagen.build.builder import (
+from gagen.building import builder, cache
+from gagen.building.builder import (
     CacheWarning,
     cached_module_is_intact,
     clean_abandoned_builds,

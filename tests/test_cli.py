@@ -167,7 +167,7 @@ def test_progress_goes_to_stderr_unless_quiet(tmp_path, cache_dir, capsys):
 
 
 def _progress(verbose: bool):
-    from gagen.build.builder import BuildReport, Progress
+    from gagen.building.builder import BuildReport, Progress
 
     return Progress(BuildReport("m", "m_mod", REPO), verbose)
 
@@ -177,7 +177,7 @@ def test_library_progress_is_logged_and_quiet_by_default(capsys, caplog):
         _progress(False).stage("derive", 1.25, "3 coordinates")
     assert capsys.readouterr().err == ""
     [record] = caplog.records
-    assert record.name == "gagen.build.builder" and record.levelno == logging.INFO
+    assert record.name == "gagen.building.builder" and record.levelno == logging.INFO
     assert record.getMessage() == "derive       1.25 s  3 coordinates"
 
 

@@ -15,7 +15,7 @@ import pytest
 from conftest import REPO
 
 import gagen
-from gagen.build.builder import build, generate_sources, module_name_for, source_key
+from gagen.building.builder import build, generate_sources, module_name_for, source_key
 from gagen.codegen.render import COPIED_FILES, MODEL_C_FILES, generate
 from gagen.model.modelfile import parse_model_text
 from gagen.sim.controllers import paper_controller
@@ -53,7 +53,7 @@ def test_generation_is_byte_identical_across_processes(tmp_path):
     script = textwrap.dedent("""
         import hashlib, sys
         import gagen
-        from gagen.build.builder import generate_sources
+        from gagen.building.builder import generate_sources
         generate_sources(gagen.resolve_model(sys.argv[1]), __import__("pathlib").Path(sys.argv[2]))
     """)
     digests = []
@@ -240,7 +240,7 @@ def test_concurrent_builds_of_one_model_both_succeed(tmp_path):
 
 
 def test_interrupted_build_leaves_nothing_loadable(tmp_path, monkeypatch):
-    from gagen.build import builder as build_module
+    from gagen.building import builder as build_module
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
@@ -252,7 +252,7 @@ def test_interrupted_build_leaves_nothing_loadable(tmp_path, monkeypatch):
 
 
 def test_compiler_errors_are_shown(tmp_path, monkeypatch):
-    from gagen.build import builder as build_module
+    from gagen.building import builder as build_module
 
     real = build_module.generate_sources
 

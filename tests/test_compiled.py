@@ -167,7 +167,7 @@ def test_singular_mass_matrix_raises(rrr):
 
 
 def test_missing_compiler_names_lambdify(monkeypatch, tmp_path):
-    from gagen.build import builder as build
+    from gagen.building import builder as build
 
     monkeypatch.setenv("CC", "no-such-compiler-gagen")
     with pytest.raises(build.CompilerNotFoundError, match="lambdify"):

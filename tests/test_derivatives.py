@@ -490,7 +490,7 @@ def test_floating_base_derivatives_match_pinocchio(backend, tmp_path):
 
 def test_derivative_sources_are_identical_across_hash_seeds(tmp_path):
     script = ("import sys, pathlib, gagen\n"
-              "from gagen.build.builder import generate_sources\n"
+              "from gagen.building.builder import generate_sources\n"
               "generate_sources(gagen.resolve_model('chain:3'), pathlib.Path(sys.argv[1]),"
               " derivatives=True)\n")
     digests = []
@@ -548,7 +548,7 @@ int main(void)
 
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed")
 def test_standalone_c_program_computes_the_same_numbers(tmp_path):
-    from gagen.build.builder import generate_sources
+    from gagen.building.builder import generate_sources
 
     generate_sources(gagen.resolve_model("rrr"), tmp_path, derivatives=True)
     ref = lambdify_dynamics("rrr")

@@ -19,7 +19,7 @@ import pytest
 
 import gagen
 from gagen.app.cli import main as cli_main
-from gagen.build import cache
+from gagen.building import cache
 from gagen.errors import ModelError
 from gagen.model.inputs import MAX_BODIES
 from gagen.model.mjcf import compile_mjcf, joint_terms, load_mjcf

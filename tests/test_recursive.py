@@ -8,8 +8,8 @@ import sympy as sp
 from conftest import SHARED_URDF
 from random_trees import random_model
 
-from gagen.build import builder
-from gagen.build.cache import import_extension
+from gagen.building import builder
+from gagen.building.cache import import_extension
 from gagen.model.resolve import resolve_model
 from gagen.runtime.compiled import CompiledDynamics
 from gagen.runtime.lambdify import LambdifyDynamics

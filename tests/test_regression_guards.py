@@ -184,7 +184,7 @@ def test_the_cache_key_changes_when_the_generator_changes(tmp_path):
                     ignore=shutil.ignore_patterns("*.so", "__pycache__"))
     script = textwrap.dedent("""
         import gagen
-        from gagen.build.builder import source_key
+        from gagen.building.builder import source_key
         print(source_key(gagen.resolve_model("chain:2")))
     """)
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gagen.build.builder import build, import_extension
+from gagen.building.builder import build, import_extension
 from gagen.codegen.config import CodegenConfig
 from gagen.codegen.segments import Statement, schedule_late, split
 from gagen.model.resolve import resolve_model

@@ -23,7 +23,7 @@ import pytest
 
 import gagen
 from gagen.app.cli import main as cli_main
-from gagen.build.builder import build
+from gagen.building.builder import build
 from gagen.model.resolve import resolve_model
 
 pin = pytest.importorskip("pinocchio")

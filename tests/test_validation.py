@@ -284,7 +284,7 @@ def test_failed_build_writes_nothing(tmp_path, capsys):
 
 def test_build_failing_after_loading_writes_nothing(tmp_path, capsys, monkeypatch):
     """The model loads but the build fails later: no folder is left behind."""
-    from gagen.build import builder as build_module
+    from gagen.building import builder as build_module
     from gagen.model import ModelError as Error
 
     def failing(model, *args, **kwargs):

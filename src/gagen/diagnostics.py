@@ -1,7 +1,7 @@
 """gagen's diagnostics go through `logging`, under the `gagen` logger.
 
 Every module logs to its own child logger (`logging.getLogger(__name__)`, e.g.
-`gagen.build.builder`): build stages and their times, the command line's progress, at
+`gagen.building.builder`): build stages and their times, the command line's progress, at
 INFO. A library call is quiet unless the application turns logging on, as for any
 library; `showing_progress()` shows gagen's INFO records on stderr as `gagen: <message>`
 lines for the duration of one call (what `gagen.load(..., verbose=True)` and the command

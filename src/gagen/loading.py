@@ -2,7 +2,7 @@
 objects.
 
 A model loaded before is found by a key of its input bytes in the cache's index, and
-loads without SymPy; anything else is read, derived and built (gagen.build.builder).
+loads without SymPy; anything else is read, derived and built (gagen.building.builder).
 """
 
 from __future__ import annotations
@@ -77,7 +77,7 @@ def _load_compiled(model, cache_dir=None, fast_math: bool = False, verbose=None,
 
 def _compiled_dynamics(model, cache_dir, fast_math, verbose, portable, derivation, strict,
                        floating_base):
-    from .build import cache
+    from .building import cache
 
     digest = None
     build_options = {"cache_dir": cache_dir, "fast_math": fast_math, "verbose": verbose,
@@ -94,7 +94,7 @@ def _compiled_dynamics(model, cache_dir, fast_math, verbose, portable, derivatio
 
             return CompiledDynamics(module, (model, floating_base),
                                     derivatives=_DerivativeModule(digest, build_options))
-    from .build.builder import load_compiled
+    from .building.builder import load_compiled
     from .model.resolve import resolve_model
 
     return load_compiled(resolve_model(model, strict, floating_base),
@@ -110,7 +110,7 @@ class _DerivativeModule:
         self.digest, self.build_options = digest, build_options
 
     def __call__(self, dyn):
-        from .build import cache
+        from .building import cache
 
         key = cache.derivatives_input_key(self.digest) if self.digest else None
         if key is not None:
@@ -119,6 +119,6 @@ class _DerivativeModule:
             module = cache.index_lookup(folder, key)
             if module is not None:
                 return module
-        from .build.builder import load_derivative_module
+        from .building.builder import load_derivative_module
 
         return load_derivative_module(dyn.model, input_digest=key, **self.build_options)

@@ -272,7 +272,7 @@ def _bench_arguments(p: argparse.ArgumentParser) -> None:
 
 def build_command(args: argparse.Namespace) -> int:
     """Derive, generate and compile a model; print what was done."""
-    from ..build.builder import build
+    from ..building.builder import build
     from ..model.resolve import resolve_model
 
     model = resolve_model(args.model, strict=args.strict, floating_base=args.floating_base)
@@ -555,7 +555,7 @@ def parser() -> argparse.ArgumentParser:
 # What a user can cause, and the exit code each gets: bad input (2) or a run that failed (1).
 # Anything else is a bug in gagen and keeps its traceback.
 def _exit_code(exc: BaseException) -> int | None:
-    from ..build.builder import BuildError
+    from ..building.builder import BuildError
     from ..runtime.dynamics import SingularMassMatrixError
 
     if isinstance(exc, (BuildError, SingularMassMatrixError, NonFiniteStateError, OSError,

@@ -94,7 +94,7 @@ def _tree_pages(root: int) -> int:
 def main(argv: list[str] | None = None) -> int:
     from sympy.core.cache import clear_cache
 
-    from ..build.builder import build
+    from ..building.builder import build
     from ..model.resolve import resolve_model
 
     args = argv or sys.argv[1:]

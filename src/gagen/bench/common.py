@@ -152,7 +152,7 @@ def compiled(model, cache_dir: Path, verbose: bool = False):
     module shipped with the package: the module timed is the one just built (and its
     derivative module is built into the same folder on first use).
     """
-    from ..build.builder import build, import_extension, load_derivative_module
+    from ..building.builder import build, import_extension, load_derivative_module
     from ..runtime.compiled import CompiledDynamics
 
     start = time.perf_counter()

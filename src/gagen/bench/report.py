@@ -263,7 +263,7 @@ def markdown(results: dict, images: dict | None = None) -> str:
         results, "scaling", "Scaling: build and call time against the robot's size",
         "Cold builds, each in a fresh process and cache folder: derive, generate and "
         "compile (Cython and the C compiler, as many at once as there are cores) as "
-        "`gagen.build.build` reports them, the build's wall time and the peak memory of "
+        "`gagen.building.build` reports them, the build's wall time and the peak memory of "
         "its process tree. Then, per model, gagen's forward dynamics, inverse dynamics and "
         "mass matrix per call from Python against Pinocchio's `aba`, `rnea` and `crba` "
         f"(Pinocchio's own URDF parse; {sc.get('repeats', '?')} interleaved repeats), and "

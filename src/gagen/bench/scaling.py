@@ -1,7 +1,7 @@
 """How build time, memory and call time grow with the robot, against Pinocchio.
 
 For each model: a cold build in a fresh process (a new cache folder), timed stage by
-stage as `gagen.build.build` reports it (derive; generate; compile: Cython and the C
+stage as `gagen.building.build` reports it (derive; generate; compile: Cython and the C
 compiler, in parallel), with its wall time and the peak memory of the whole process tree
 (gagen.bench.coldbuild); then the module is loaded and forward dynamics, inverse dynamics
 and the mass matrix are timed per call from Python against Pinocchio's `aba`, `rnea` and
@@ -79,7 +79,7 @@ def _slug(name: str) -> str:
 def build_row(name: str, cache_dir: Path) -> tuple[dict, object]:
     """Build one model cold, in a fresh process, into `cache_dir`; its row (build columns
     only) and its dynamics, loaded from that cache entry."""
-    from ..build.builder import import_extension, load_derivative_module
+    from ..building.builder import import_extension, load_derivative_module
     from ..model.resolve import resolve_model
     from ..runtime.compiled import CompiledDynamics
     from .coldbuild import measured_build

@@ -4,7 +4,7 @@ printed as four C functions, in a module of their own.
 The derivative program is large (the Panda's inverse-dynamics derivatives are ten times
 its inverse dynamics), so it is not part of a model's main module: a model's default build
 stays as fast as it was, and `gagen.load` builds this module on first use of a derivative
-(gagen.build.builder). Its files do not clash with the main module's: the header is
+(gagen.building.builder). Its files do not clash with the main module's: the header is
 `<ident>_derivatives.h`, the C file `derivatives.c`, the segment functions of split
 kernels `derivative_kernels_<k>.c`, and every function is `<ident>_...`, so a C program can
 compile both modules' sources together.

@@ -62,7 +62,7 @@ def worker_dynamics(payload: ModulePayload):
     with _received_lock:
         dyn = _received.get(payload.sha256)
         if dyn is None:
-            from ..build.cache import (
+            from ..building.cache import (
                 default_cache_dir,
                 import_extension,
                 install_received_module,

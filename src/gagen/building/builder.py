@@ -103,7 +103,7 @@ def model_key(model: Model) -> str:
 
 
 class Progress:
-    """Logs each stage and its time at INFO (logger gagen.build.builder); `verbose` shows
+    """Logs each stage and its time at INFO (logger gagen.building.builder); `verbose` shows
     them on stderr for this build (gagen.diagnostics.showing_progress)."""
 
     def __init__(self, report: BuildReport, verbose: bool):
