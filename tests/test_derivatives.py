@@ -254,6 +254,52 @@ def test_program_continues_the_equations_and_its_kernels_use_their_arguments(nam
     assert d.operation_count() >= d.operation_count("coriolis_matrix") > 0
 
 
+ANALYTIC_CASES = ["random1", "random4", "random7", "random12", "chain5-recursive", "ur5"]
+
+
+@pytest.mark.parametrize("case", ANALYTIC_CASES)
+def test_analytical_algorithm_matches_forward_mode(case):
+    """The world-frame algorithm (symbolic/rnea_derivatives.py) against forward mode
+    through the equations' own program, at random states and parameters: d tau/d q,
+    d tau/d qd, and the M and forcing it gives the forward-dynamics derivatives. Also on
+    the closed form (chain:5 by Gibbs-Appell), whose program shares nothing with it."""
+    name, derivation, vary = CASES[case]
+    cases = [(derivation, vary)] + ([("gibbs-appell", True)] if case == "chain5-recursive"
+                                    else [])
+    for derivation, vary in cases:
+        eqs = derive_equations(_model(name), derivation)
+        dyn = LambdifyDynamics(eqs)
+        c, p = eqs.coords, eqs.parameters
+        args = [c.q, c.qd, c.qdd, c.tau, p]
+        values = {}
+        for method in ("forward", "analytic"):
+            d = derive_derivatives(eqs, method)
+            M = eqs.mass_matrix if d.mass_matrix is None else d.mass_matrix
+            forcing = eqs.forcing if d.forcing is None else d.forcing
+            exprs = [*d.dtau_dq, *d.dtau_dqd, *M, *forcing]
+            values[method] = dyn._lambdify(args, exprs, d.intermediates)
+        rng = np.random.default_rng(3)
+        for _ in range(3):
+            q, qd, qdd, tau, pv = random_state(dyn, rng, vary)
+            flat = [*q, *qd, *qdd, *tau, *pv]
+            got, want = (np.array(values[m](*flat), float) for m in ("analytic", "forward"))
+            assert_close(got, want, rtol=1e-11)
+
+
+def test_derivative_method_rule():
+    from gagen.symbolic.derivatives import ANALYTIC_FROM_DOF, derivative_method
+
+    assert derivative_method(resolve_model("rrr")) == "forward"
+    assert derivative_method(resolve_model(f"chain:{ANALYTIC_FROM_DOF}")) == "analytic"
+    assert derivative_method(resolve_model("rrr"), "analytic") == "analytic"
+    floating = resolve_model(SHARED_URDF / "panda.urdf", floating_base=True)
+    assert derivative_method(floating) == "forward"
+    with pytest.raises(ValueError, match="floating joint"):
+        derivative_method(floating, "analytic")
+    with pytest.raises(ValueError, match="unknown derivative method"):
+        derivative_method(floating, "backward")
+
+
 def test_structural_zeros_are_exact():
     """chain:N's first joint turns about the vertical: nothing depends on its angle."""
     d = derive_derivatives(derive_equations(resolve_model("chain:4"), "recursive"))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .segments import FILE_CHARS, SEGMENT_CHARS, SPLIT_CHARS
+from .segments import DERIVATIVE_SPLIT_CHARS, FILE_CHARS, SEGMENT_CHARS, SPLIT_CHARS
 
 # Stages of at most this many operations go inline into each of the integrators' stages
 # (a dozen copies): measured, larger ones compile slowly for no gain (docs/benchmarks.md).
@@ -22,6 +22,8 @@ class CodegenConfig:
     split_chars        a kernel with more characters of C than this is split into segment
                        functions (codegen/segments.py)
     segment_chars      ... into segments of about this many characters each
+    derivative_split_chars
+                       split_chars for the derivative module's kernels (codegen/segments.py)
     file_chars         the segment functions go into files of about this many characters
     cse                sympy.cse over the intermediates and outputs (False: the derivation's
                        own named intermediates as they are; None: for the Gibbs-Appell form
@@ -34,5 +36,6 @@ class CodegenConfig:
     fast_trig: bool = True
     split_chars: int = SPLIT_CHARS
     segment_chars: int = SEGMENT_CHARS
+    derivative_split_chars: int = DERIVATIVE_SPLIT_CHARS
     cse: bool | None = None
     file_chars: int = FILE_CHARS

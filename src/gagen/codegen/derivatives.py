@@ -28,6 +28,7 @@ solves with the same factors for -M^-1 dtau/dq, -M^-1 dtau/dqd and M^-1.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from importlib import resources
 
@@ -82,9 +83,10 @@ def derivative_program(deq: DerivativeEquations
                        ) -> tuple[list[tuple[sp.Symbol, sp.Expr]], dict[str, list[sp.Expr]]]:
     """The outputs of the derivative module (name -> list) and the definitions they need."""
     eqs, n = deq.equations, deq.n
+    M = eqs.mass_matrix if deq.mass_matrix is None else deq.mass_matrix
     outputs = {
-        "mass_matrix": [eqs.mass_matrix[r, s] for r in range(n) for s in range(r + 1)],
-        "forcing": list(eqs.forcing),
+        "mass_matrix": [M[r, s] for r in range(n) for s in range(r + 1)],
+        "forcing": list(eqs.forcing if deq.forcing is None else deq.forcing),
         "dtau_dq": list(deq.dtau_dq),
         "dtau_dqd": list(deq.dtau_dqd),
         "coriolis": list(deq.coriolis),
@@ -142,7 +144,9 @@ def generate_derivatives(deq: DerivativeEquations, module_name: str, key: str,
     cse = CSEResult(eqs, eqs.derivation == "gibbs-appell" if config.cse is None
                     else config.cse, definitions, outputs)
     printer = GagenCPrinter(_symbol_names(eqs, cse), list(eqs.coords.q), config.fast_trig)
-    kernels = _Kernels(ident, cse, printer, config, arrays=DERIVATIVE_KERNEL_ARRAYS,
+    kernels = _Kernels(ident, cse, printer,
+                       dataclasses.replace(config, split_chars=config.derivative_split_chars),
+                       arrays=DERIVATIVE_KERNEL_ARRAYS,
                        looped=DERIVATIVE_LOOPED_KERNELS)
     blocks = _blocks(deq, kernels)
     n = eqs.n

@@ -3,7 +3,11 @@
 `derive_derivatives(eqs)` differentiates the straight-line program of an `Equations`
 (either derivation: Gibbs-Appell or recursive RNEA/CRBA) by forward mode through its named
 intermediates (`differentiate.differentiate`: the chain rule per definition, each sum
-named; nothing is expanded, nothing is a finite difference). It returns one program,
+named; nothing is expanded, nothing is a finite difference). From 4 coordinates on, a
+fixed-base model's inverse-dynamics derivatives come instead from the analytical
+algorithm of `rnea_derivatives` (the chain rule worked out once by hand in the world
+frame, then written symbolically per model: half the Panda's operations; the rule and
+its measurements are at ANALYTIC_FROM_DOF). Either way it returns one program,
 `DerivativeEquations.intermediates` = `eqs.intermediates` followed by the derivative's
 own definitions (numbered after them, never defining a name twice, reusing every
 expression `eqs` already named), and two kernels' outputs, flat lists of expressions in
@@ -24,7 +28,8 @@ symmetric in j and k, and b is quadratic in qd,
     d b_i / d qd_j = sum_k (Gamma_ijk + Gamma_ikj) qd_k = 2 C_ij,     so  C = 1/2 db/dqd:
 one forward-mode pass over the velocity terms' program with the n rates as variables,
 cheaper than C = 1/2 (Mdot + J - J^T) with Mdot = sum_k dM/dq_k qd_k and J = d(M qd)/dq
-(the same matrix, from M's program with n + 1 directions). Pinocchio's
+(the same matrix, from M's program with n + 1 directions). With the analytical algorithm
+C is half its rigid-body d tau/d qd, computed by the same world-frame pass. Pinocchio's
 `computeCoriolisMatrix` gives this same C (tests/test_derivatives.py). For the same
 reason dtau_dqd = db/dqd = 2 C: the equations have no other rate-dependent term. (Should
 rate-dependent joint terms such as viscous damping join the equations, they belong in
@@ -55,8 +60,10 @@ from dataclasses import dataclass
 
 import sympy as sp
 
+from . import rnea_derivatives
 from .differentiate import differentiate, needed_definitions, recorder_after
 from .gibbs_appell import Equations
+from .joints import armatures, dampings, dissipative_forces
 from .kinematics import Recorder, quaternion_rotation
 
 
@@ -75,6 +82,11 @@ class DerivativeEquations:
     dtau_dq: list[sp.Expr]      # row-major n x n, in q, qd, qdd, p
     dtau_dqd: list[sp.Expr]     # row-major n x n, in q, qd, p
     coriolis: list[sp.Expr]     # row-major n x n, in q, qd, p
+    # M(q) and the forcing tau - b + g that the forward-dynamics derivatives factor and
+    # solve with: the equations' own, or the same quantities from the derivatives'
+    # world-frame pass (rnea_derivatives), which then costs a dot product per entry
+    mass_matrix: sp.Matrix | None = None
+    forcing: list[sp.Expr] | None = None
     seconds: float = 0.0
 
     @property
@@ -106,18 +118,64 @@ class DerivativeEquations:
         return sum(sp.count_ops(e) for _, e in needed) + sum(sp.count_ops(e) for e in exprs)
 
 
-def derive_derivatives(eqs: Equations) -> DerivativeEquations:
+DERIVATIVE_METHODS = ("auto", "forward", "analytic")
+# From this many coordinates on, "auto" takes the analytical world-frame algorithm
+# (symbolic/rnea_derivatives.py) for a fixed-base model; forward mode through the
+# equations' program otherwise (and always with a floating joint). Measured by
+# benchmarks/derivative_ops.py: count_ops of the inverse-dynamics-derivatives kernel,
+# forward mode / analytical:
+#
+#   rrr 704 / 1201, chain:3 869 / 1256, double pendulum 176 / 193 (closed forms: forward
+#   mode wins); chain:4 2360 / 2237, chain:5 4763 / 3280, chain:6 4252 / 4385, SO-100
+#   7114 / 6062, UR5 5932 / 4808, Panda 15313 / 7695.
+#
+# The analytical pass also gives M and the bias forces at a dot product per entry, which
+# the forward-dynamics derivatives factor (the Panda's went from 3.70 to 2.50 us per call).
+ANALYTIC_FROM_DOF = 4
+
+
+def derivative_method(model, method: str = "auto") -> str:
+    """"forward" or "analytic": what `method` ("auto", "forward", "analytic") means here."""
+    if method not in DERIVATIVE_METHODS:
+        raise ValueError(f"unknown derivative method '{method}' (expected one of "
+                         f"{', '.join(DERIVATIVE_METHODS)})")
+    covered = rnea_derivatives.applies(model)
+    if method == "analytic" and not covered:
+        raise ValueError("the analytical derivatives cover 1-dof joints only; "
+                         f"model '{model.name}' has a floating joint")
+    if method != "auto":
+        return method
+    return "analytic" if covered and model.dof >= ANALYTIC_FROM_DOF else "forward"
+
+
+def derive_derivatives(eqs: Equations, method: str = "auto") -> DerivativeEquations:
     """The derivative kernels of `eqs` as a continuation of its program (module docstring).
 
     With a floating joint (q holds a quaternion, nq > n), d tau / d q is taken along the n
     velocity directions, as Pinocchio's derivatives are: d/de tau(q (+) e v_j) at e = 0,
-    the Jacobian by q's nq entries times the tangent map G(q) (`tangent_map`)."""
+    the Jacobian by q's nq entries times the tangent map G(q) (`tangent_map`).
+
+    `method`: "forward" differentiates the equations' program by forward mode,
+    "analytic" writes the world-frame algorithm of `rnea_derivatives` (fixed base only),
+    "auto" chooses by the measured rule above (`derivative_method`)."""
     start = time.perf_counter()
     n, nq, c = eqs.n, eqs.nq, eqs.coords
     rec = recorder_after(eqs.intermediates)
-    jacobian = differentiate(eqs.intermediates, list(eqs.inverse_dynamics), c.q + c.qd, rec)
-    db_dqd = differentiate(eqs.intermediates, list(eqs.velocity_terms), c.qd, rec)
-    by_q = [row[:nq] for row in jacobian]
+    method = derivative_method(eqs.model, method)
+    mass_matrix, forcing = eqs.mass_matrix, list(eqs.forcing)
+    if method == "analytic":
+        world = rnea_derivatives.rnea_derivatives(eqs.model, c, rec)
+        by_q, db_dqd = world.dtau_dq, world.dtau_dqd
+        damping = [d * qd for d, qd in zip(dampings(eqs.model), c.qd)]
+        by_qd = [[rec.name(e + damping[i].diff(c.qd[j])) for j, e in enumerate(row)]
+                 for i, row in enumerate(db_dqd)]
+        jacobian = [row_q + row_qd for row_q, row_qd in zip(by_q, by_qd)]
+        mass_matrix, forcing = _with_joint_terms(eqs, world.mass_matrix, world.bias)
+    else:
+        db_dqd = differentiate(eqs.intermediates, list(eqs.velocity_terms), c.qd, rec)
+        jacobian = differentiate(eqs.intermediates, list(eqs.inverse_dynamics),
+                                 c.q + c.qd, rec)
+        by_q = [row[:nq] for row in jacobian]
     if nq != n:
         columns = tangent_map(eqs.model, c.q, rec)
         by_q = [[rec.name(sp.Add(*(row[r] * g for r, g in columns[j] if row[r] != 0)))
@@ -129,9 +187,21 @@ def derive_derivatives(eqs: Equations) -> DerivativeEquations:
         dtau_dq=[e for row in by_q for e in row],
         dtau_dqd=[row[nq + j] for row in jacobian for j in range(n)],
         coriolis=[half * e for row in db_dqd for e in row],
+        mass_matrix=mass_matrix,
+        forcing=forcing,
     )
     derivatives.seconds = time.perf_counter() - start
     return derivatives
+
+
+def _with_joint_terms(eqs: Equations, rigid_mass: list[list[sp.Expr]], bias: list[sp.Expr]
+                      ) -> tuple[sp.Matrix, list[sp.Expr]]:
+    """M and the forcing from a rigid-body M and bias forces (b - g), with the joint terms
+    of `symbolic.joints` added as `add_joint_terms` adds them to the equations."""
+    M = sp.Matrix(rigid_mass) + sp.diag(*armatures(eqs.model))
+    dissipative = dissipative_forces(eqs.model, eqs.coords)
+    forcing = [t - b - d for t, b, d in zip(eqs.coords.tau, bias, dissipative)]
+    return M, forcing
 
 
 def tangent_map(model, q: list[sp.Symbol], rec: Recorder) -> list[list[tuple[int, sp.Expr]]]:

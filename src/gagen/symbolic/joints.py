@@ -39,6 +39,11 @@ def armatures(model: Model) -> list[sp.Expr]:
     return _per_coordinate(model, "armature")
 
 
+def dampings(model: Model) -> list[sp.Expr]:
+    """damping_k per velocity coordinate (0 for a floating joint's)."""
+    return _per_coordinate(model, "damping")
+
+
 def dissipative_forces(model: Model, coords: CoordinateSymbols) -> list[sp.Expr]:
     """damping_k q̇_k + friction_k sign(q̇_k) per velocity coordinate (zero terms left out)."""
     damping, friction = _per_coordinate(model, "damping"), _per_coordinate(model, "friction")
