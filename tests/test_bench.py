@@ -249,3 +249,14 @@ def test_bench_smoke_run_writes_the_report(tmp_path, cache_dir, capsys):
     assert "## The derivatives per call" in text
     for png in ("percall.png", "batched.png", "simulation.png", "scaling.png"):
         assert (out / png).exists()
+
+
+def test_scaling_table_shows_both_cpp_peers():
+    """The batched columns give the C++ loop's ratio leaving its results and storing them."""
+    from gagen.bench.scaling import markdown_table
+
+    row = dict(synthetic_results()["scaling"]["rows"][2])
+    row.update({"M_state_us": 2.0, "cpp_M_us": 1.8, "cpp_stored_M_us": 4.0})
+    table = markdown_table([row])
+    assert "C++ storing ×" in table.splitlines()[0]
+    assert table.splitlines()[2].endswith("| 2.00 (0.9×, 2.0×) |")

@@ -1,6 +1,10 @@
 """Pinocchio in C++, the peer of gagen's batched C loop: `aba`, `rnea` and `crba` over
 stacked states with no Python in between, so a per-state time of gagen's batched kernels
-meets Pinocchio's own per-call cost, not Pinocchio plus its Python binding.
+meets Pinocchio's own per-call cost, not Pinocchio plus its Python binding. Each is timed
+twice: leaving each result in Pinocchio's `data`, where the next call overwrites it, and
+storing every state's result (M in full) in a fresh array of the batch, the output that
+gagen's batched call returns; for the mass matrix of a big robot that output is most of
+the memory traffic (chain:50: 20 MB per 1000 states).
 
 The harness is compiled against the headers of the installed `pin` wheel (its cmeel
 prefix, with Eigen from `cmeel-eigen`: `pip install gagen[bench]`), header-only, with
@@ -26,15 +30,20 @@ HARNESS = r"""
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <memory>
 #include <vector>
 
-// usage: harness MODEL.bin STATES REPEATS -> {"aba": us, "rnea": us, "crba": us} (medians)
+// usage: harness MODEL.bin STATES REPEATS -> {"aba": us, ..., "crba_stored": us} (medians)
+// "aba", "rnea", "crba": each call's result left in `data` and overwritten by the next;
+// "..._stored": every state's result written to a fresh array of the batch (allocated
+// per batch, uninitialised, freed after it, M in full), as gagen's batched call returns it
 int main(int argc, char **argv) {
   if (argc < 4) return 2;
   pinocchio::Model model;
   model.loadFromBinary(argv[1]);
   pinocchio::Data data(model);
   const int n = std::atoi(argv[2]), repeats = std::atoi(argv[3]);
+  const long nv = model.nv;
   std::srand(1);
   std::vector<Eigen::VectorXd> q(n), v(n), t(n);
   for (int i = 0; i < n; ++i) {
@@ -42,23 +51,51 @@ int main(int argc, char **argv) {
     v[i] = Eigen::VectorXd::Random(model.nv);
     t[i] = Eigen::VectorXd::Random(model.nv);
   }
-  std::vector<double> s[3];
+  std::vector<double> s[6];
   double sink = 0.0;
+  using clock = std::chrono::steady_clock;
+  auto per_state = [n](clock::time_point a, clock::time_point b) {
+    return std::chrono::duration<double>(b - a).count() / n;
+  };
+  // every state's result, `size` doubles, into a fresh array of the batch
+  auto stored = [&](long size, auto write) {
+    std::unique_ptr<double[]> out(new double[n * size]);
+    for (int i = 0; i < n; ++i) write(i, out.get() + i * size);
+    sink += out[n * size - 1];
+  };
   for (int r = 0; r < repeats; ++r) {
-    auto t0 = std::chrono::steady_clock::now();
+    auto t0 = clock::now();
     for (int i = 0; i < n; ++i) sink += pinocchio::aba(model, data, q[i], v[i], t[i])[0];
-    auto t1 = std::chrono::steady_clock::now();
+    auto t1 = clock::now();
     for (int i = 0; i < n; ++i) sink += pinocchio::rnea(model, data, q[i], v[i], t[i])[0];
-    auto t2 = std::chrono::steady_clock::now();
+    auto t2 = clock::now();
     for (int i = 0; i < n; ++i) sink += pinocchio::crba(model, data, q[i])(0, 0);
-    auto t3 = std::chrono::steady_clock::now();
-    s[0].push_back(std::chrono::duration<double>(t1 - t0).count() / n);
-    s[1].push_back(std::chrono::duration<double>(t2 - t1).count() / n);
-    s[2].push_back(std::chrono::duration<double>(t3 - t2).count() / n);
+    auto t3 = clock::now();
+    stored(nv, [&](int i, double *o) {
+      Eigen::Map<Eigen::VectorXd>(o, nv) = pinocchio::aba(model, data, q[i], v[i], t[i]);
+    });
+    auto t4 = clock::now();
+    stored(nv, [&](int i, double *o) {
+      Eigen::Map<Eigen::VectorXd>(o, nv) = pinocchio::rnea(model, data, q[i], v[i], t[i]);
+    });
+    auto t5 = clock::now();
+    stored(nv * nv, [&](int i, double *o) {
+      pinocchio::crba(model, data, q[i]);
+      Eigen::Map<Eigen::MatrixXd>(o, nv, nv) = data.M.selfadjointView<Eigen::Upper>();
+    });
+    auto t6 = clock::now();
+    s[0].push_back(per_state(t0, t1));
+    s[1].push_back(per_state(t1, t2));
+    s[2].push_back(per_state(t2, t3));
+    s[3].push_back(per_state(t3, t4));
+    s[4].push_back(per_state(t4, t5));
+    s[5].push_back(per_state(t5, t6));
   }
   for (auto &x : s) std::sort(x.begin(), x.end());
-  std::printf("{\"aba\": %.6f, \"rnea\": %.6f, \"crba\": %.6f, \"sink\": %g}\n",
-              s[0][repeats / 2] * 1e6, s[1][repeats / 2] * 1e6, s[2][repeats / 2] * 1e6, sink);
+  const char *names[6] = {"aba", "rnea", "crba", "aba_stored", "rnea_stored", "crba_stored"};
+  std::printf("{");
+  for (int k = 0; k < 6; ++k) std::printf("\"%s\": %.6f, ", names[k], s[k][repeats / 2] * 1e6);
+  std::printf("\"sink\": %g}\n", sink);
   return 0;
 }
 """
@@ -106,10 +143,12 @@ def build_harness(folder: Path) -> tuple[Path | None, str]:
 
 def cpp_times(binary: Path, pinocchio_model, folder: Path, states: int = 1000,
               repeats: int = 11) -> dict[str, float]:
-    """Median µs per call of aba, rnea and crba over `states` stacked random states."""
+    """Median µs per state of aba, rnea and crba over `states` stacked random states: each
+    result left in Pinocchio's `data` (keys "aba", "rnea", "crba") or written, M in full,
+    to a fresh array of the batch as gagen's batched call returns them ("..._stored")."""
     path = folder / "model.bin"
     pinocchio_model.saveToBinary(str(path))
     result = subprocess.run([str(binary), str(path), str(states), str(repeats)],
                             capture_output=True, text=True, check=True)
     times = json.loads(result.stdout)
-    return {key: times[key] for key in ("aba", "rnea", "crba")}
+    return {key: value for key, value in times.items() if key != "sink"}

@@ -268,7 +268,10 @@ def markdown(results: dict, images: dict | None = None) -> str:
         "mass matrix per call from Python against Pinocchio's `aba`, `rnea` and `crba` "
         f"(Pinocchio's own URDF parse; {sc.get('repeats', '?')} interleaved repeats), and "
         "per state in gagen's batched loop (1000 stacked states) against Pinocchio's "
-        "algorithms in a C++ loop compiled with -O3 -march=native, where available. "
+        "algorithms in a C++ loop compiled with -O3 -march=native, where available, "
+        "timed twice: each result left in Pinocchio's `data` for the next call to "
+        "overwrite, and every state's result stored (M in full) in a fresh array of the "
+        "batch, the output gagen's batched call returns. "
         "(×): Pinocchio's time as a multiple of gagen's (> 1: gagen is faster).",
         scaling_table, None, images)
     notes = results.get("notes") or []

@@ -40,7 +40,8 @@ KERNELS = (("fd", "forward_dynamics", "aba"), ("id", "inverse_dynamics", "rnea")
 COLUMNS = ("model", "dof", "derive_s", "generate_s", "compile_s", "build_s", "peak_mb",
            "ops_before_cse", "ops_after_cse", "fd_us", "id_us", "M_us", "pin_fd_us",
            "pin_id_us", "pin_M_us", "fd_state_us", "id_state_us", "M_state_us",
-           "cpp_fd_us", "cpp_id_us", "cpp_M_us", "cached")
+           "cpp_fd_us", "cpp_id_us", "cpp_M_us", "cpp_stored_fd_us", "cpp_stored_id_us",
+           "cpp_stored_M_us", "cached")
 
 
 def scaling_models(full: bool = False, urdf_dir=None) -> tuple[list[str], list[str]]:
@@ -191,14 +192,16 @@ def scaling_rows(models, cache_dir, repeats: int = REPEATS, target: float = DEFA
 
             times = cpp_times(harness, peer, Path(cache_dir) / "pinocchio-cpp")
             row.update({"cpp_fd_us": times["aba"], "cpp_id_us": times["rnea"],
-                        "cpp_M_us": times["crba"]})
+                        "cpp_M_us": times["crba"], "cpp_stored_fd_us": times["aba_stored"],
+                        "cpp_stored_id_us": times["rnea_stored"],
+                        "cpp_stored_M_us": times["crba_stored"]})
         if progress:
             progress(f"{row['model']:<14} per call FD {row['fd_us']:.2f} µs (Pinocchio "
                      f"{row['pin_fd_us']:.2f}), ID {row['id_us']:.2f} ({row['pin_id_us']:.2f}), "
                      f"M {row['M_us']:.2f} ({row['pin_M_us']:.2f}); batched per state FD "
-                     f"{row['fd_state_us']:.2f} (C++ {row['cpp_fd_us']:.2f}), ID "
-                     f"{row['id_state_us']:.2f} ({row['cpp_id_us']:.2f}), M "
-                     f"{row['M_state_us']:.2f} ({row['cpp_M_us']:.2f})")
+                     f"{row['fd_state_us']:.2f} (C++ {_peer_times(row, 'fd')}), ID "
+                     f"{row['id_state_us']:.2f} ({_peer_times(row, 'id')}), M "
+                     f"{row['M_state_us']:.2f} ({_peer_times(row, 'M')})")
         rows.append(row)
         if loaded is not None:
             loaded[name] = dyn
@@ -208,8 +211,8 @@ def scaling_rows(models, cache_dir, repeats: int = REPEATS, target: float = DEFA
 def markdown_table(rows: list[dict]) -> str:
     """Build columns, then each kernel: gagen per call and Pinocchio's ratio to it."""
     head = ("| model | dof | derive s | generate s | compile s | build s | peak MB "
-            "| FD µs (Pinocchio ×) | ID µs (×) | M µs (×) | batched FD µs/state (C++ ×) "
-            "| ID (×) | M (×) |")
+            "| FD µs (Pinocchio ×) | ID µs (×) | M µs (×) "
+            "| batched FD µs/state (C++ ×, C++ storing ×) | ID (×, ×) | M (×, ×) |")
     lines = [head, "|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|"]
     for r in rows:
         cells = [f"{r[k]:.2f}" for k in ("derive_s", "generate_s", "compile_s")]
@@ -217,17 +220,25 @@ def markdown_table(rows: list[dict]) -> str:
         for key in ("fd", "id", "M"):
             cells.append(_with_ratio(r[f"{key}_us"], r[f"pin_{key}_us"]))
         for key in ("fd", "id", "M"):
-            cells.append(_with_ratio(r[f"{key}_state_us"], r[f"cpp_{key}_us"]))
+            cells.append(_with_ratio(r[f"{key}_state_us"], r[f"cpp_{key}_us"],
+                                     r.get(f"cpp_stored_{key}_us")))
         cached = " (cached)" if r.get("cached") else ""
         lines.append(f"| {r['model']}{cached} | {r['dof']} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
-def _with_ratio(mine: float, peer: float) -> str:
-    """`mine` and the peer's time as a multiple of it (> 1: gagen is faster)."""
-    if peer is None or not math.isfinite(peer):
+def _with_ratio(mine: float, peer: float, *more: float | None) -> str:
+    """`mine` and each peer's time as a multiple of it (> 1: gagen is faster)."""
+    peers = [x for x in (peer, *more) if x is not None and math.isfinite(x)]
+    if not peers:
         return f"{mine:.2f}"
-    return f"{mine:.2f} ({peer / mine:.1f}×)"
+    return f"{mine:.2f} (" + ", ".join(f"{x / mine:.1f}×" for x in peers) + ")"
+
+
+def _peer_times(row: dict, key: str) -> str:
+    """The C++ peer's per-state times for the progress line: result left, result stored."""
+    times = [row.get(f"cpp_{key}_us"), row.get(f"cpp_stored_{key}_us")]
+    return ", stored ".join(f"{t:.2f}" for t in times if t is not None and math.isfinite(t))
 
 
 # --------------------------------------------------------------------------- derivation
