@@ -97,38 +97,45 @@ class RneaDerivatives:
 
 
 def rnea_derivatives(model: Model, coords: CoordinateSymbols, rec: Recorder) -> RneaDerivatives:
-    """d tau/d q and d tau/d qd of the rigid-body tau = ID(q, qd, qdd) (the joint terms are
-    the caller's), and the rigid-body mass matrix and bias forces from the same world-frame quantities (which the
-    forward-dynamics derivatives need next to them), named in `rec` (module docstring)."""
+    """d tau/d q and d tau/d qd of the rigid-body tau = ID(q, qd, qdd), and the rigid-body
+    mass matrix and bias forces from the same world-frame quantities (the forward-dynamics
+    derivatives need them next to the others), named in `rec` (module docstring). The
+    joint terms are the caller's to add."""
     links = _links(model, coords, rec)
     n = model.dof
     kin = _world_kinematics(links, coords, model.gravity, rec)
-    Y, Ydot, H, F0, F = _subtree_sums(links, kin, rec)
+    sums = _subtree_sums(links, kin, rec)
     out = RneaDerivatives(*([[sp.Integer(0)] * n for _ in range(n)] for _ in range(3)),
                           bias=[sp.Integer(0)] * n)
-    joints = [i for i, link in enumerate(links) if link.k is not None]
-    ancestors = {i: _ancestors(links, i) for i in joints}
-    for j in joints:
-        S, dV, dA, col = kin.S[j], kin.dVdq[j], kin.dAdq[j], links[j].k
-        u = Y[j].apply(S, rec)
-        BS = _b_apply(Ydot[j], H[j], S, rec)
-        D = _add(_fcross(S, F[j], rec), Y[j].apply(dA, rec),
-                 _b_apply(Ydot[j], H[j], dV, rec))
-        E = _add(_scale(2, Y[j].apply(dV, rec)), BS)
-        D, E = _named(D, rec), _named(E, rec)
-        out.bias[col] = rec.name(_dot(S, F0[j]))
-        for i in [j, *ancestors[j]]:
+    for j, link in enumerate(links):
+        if link.k is None:
+            continue
+        col, S = link.k, kin.S[j]
+        D, E, u, w = _joint_vectors(j, kin, sums, rec)
+        out.bias[col] = rec.name(_dot(S, sums.F0[j]))
+        ancestors = _ancestors(links, j)
+        for i in [j, *ancestors]:  # row i on j's path to the root (j included)
             row = links[i].k
             out.dtau_dq[row][col] = rec.name(_dot(kin.S[i], D))
             out.dtau_dqd[row][col] = rec.name(_dot(kin.S[i], E))
             out.mass_matrix[row][col] = out.mass_matrix[col][row] = rec.name(_dot(kin.S[i], u))
-        w = _named(_sub(Ydot[j].apply(S, rec), _fcross(S, H[j], rec)), rec)
-        for i in ancestors[j]:  # j is their descendant: row j, column i
+        for i in ancestors:  # row j, column i: j is in i's subtree
             out.dtau_dq[col][links[i].k] = rec.name(_dot(kin.dAdq[i], u)
                                                    + _dot(kin.dVdq[i], w))
             out.dtau_dqd[col][links[i].k] = rec.name(2 * _dot(kin.dVdq[i], u)
                                                     + _dot(kin.S[i], w))
     return out
+
+
+def _joint_vectors(j: int, kin: _WorldKinematics, sums: _SubtreeSums, rec: Recorder
+                   ) -> tuple[Force, Force, Force, Force]:
+    """Joint j's D_j, E_j, u_j and w_j (module docstring), each entry named."""
+    S, dV, dA = kin.S[j], kin.dVdq[j], kin.dAdq[j]
+    Y, Ydot, H = sums.Y[j], sums.Ydot[j], sums.H[j]
+    D = _add(_fcross(S, sums.F[j], rec), Y.apply(dA, rec), _b_apply(Ydot, H, dV, rec))
+    E = _add(_scale(2, Y.apply(dV, rec)), _b_apply(Ydot, H, S, rec))
+    w = _sub(Ydot.apply(S, rec), _fcross(S, H, rec))
+    return _named(D, rec), _named(E, rec), Y.apply(S, rec), _named(w, rec)
 
 
 @dataclass
@@ -205,11 +212,22 @@ def _world_inertia(link: Link, R: sp.Matrix, p: Vec, rec: Recorder) -> Inertia:
     return Inertia(link.mass, rec.vec(h + link.mass * p), _symmetric(I, rec))
 
 
-def _subtree_sums(links: list[Link], kin: _WorldKinematics, rec: Recorder):
-    """The backward pass: per link, the subtree's composite inertia Y, inertia rate Ydot,
-    momentum H and force F, and F0, the part of F free of qdd (module docstring), each
-    entry named. F = F0 + the sum of I_k alpha_k, so that M and the bias forces come from
-    the qdd-free stage and only the rest depends on qdd."""
+@dataclass
+class _SubtreeSums:
+    """Per link, sums over its subtree: composite inertia Y, inertia rate Ydot, momentum H,
+    force F and F0, the part of F free of qdd."""
+
+    Y: list[Inertia]
+    Ydot: list[Inertia]
+    H: list[Force]
+    F0: list[Force]
+    F: list[Force]
+
+
+def _subtree_sums(links: list[Link], kin: _WorldKinematics, rec: Recorder) -> _SubtreeSums:
+    """The backward pass (module docstring), each entry named. F = F0 + the sum of
+    I_k alpha_k, so that M and the bias forces come from the qdd-free stage and only the
+    rest depends on qdd."""
     Y = list(kin.inertia)
     Ydot = [_inertia_rate(I, v, rec) for I, v in zip(kin.inertia, kin.v)]
     H: list[Force] = []
@@ -228,7 +246,7 @@ def _subtree_sums(links: list[Link], kin: _WorldKinematics, rec: Recorder):
             Y[P], Ydot[P] = Y[P] + Y[i], Ydot[P] + Ydot[i]
             H[P], F0[P], Fa[P] = _add(H[P], H[i]), _add(F0[P], F0[i]), _add(Fa[P], Fa[i])
     F = [_named(_add(f0, fa), rec) for f0, fa in zip(F0, Fa)]
-    return Y, Ydot, H, F0, F
+    return _SubtreeSums(Y, Ydot, H, F0, F)
 
 
 def _inertia_rate(I: Inertia, x: Motion, rec: Recorder) -> Inertia:
