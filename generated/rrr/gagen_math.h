@@ -402,7 +402,8 @@ static inline double gagen_coulomb(double f, double x, double w)
  * gravity).  Where GCC can pick a function's version when the library loads (x86-64
  * Linux with glibc's ifunc), each is built twice: for any x86-64 and for CPUs with fused
  * multiply-add, about 10 % faster; the price is their compile time, doubled.  Define
- * GAGEN_KERNEL as empty to build one portable version only.
+ * GAGEN_KERNEL as empty to build one version only: gagen does, with -mfma, when the
+ * building machine has FMA (building/cache.py, compile_flags), and for portable builds.
  */
 #ifndef GAGEN_KERNEL
 #if defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 8 && defined(__x86_64__) && \

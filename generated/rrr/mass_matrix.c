@@ -24,12 +24,9 @@ void rrr_mass_matrix(const double *q, const double *p, double *M)
     const double t77 = t54 + t5;
     const double t78 = t77*p[6];
     M[0] = t40*t40*p[5] + t47*t47*p[14] + (t49*t49*p[15] + t14*t14*p[12]) + (t18*t18*p[11] + t75*t75*p[6] + (t6 + p[9]));
-    M[3] = 0;
+    M[1] = M[3] = 0;
     M[4] = t7*(2*t52*t52 + 2*t77*t77) + p[10] + (p[13] + (1.0/4.0)*p[2]*p[2]*p[5]);
-    M[6] = 0;
-    M[7] = t5*t78 + p[13];
+    M[2] = M[6] = 0;
+    M[5] = M[7] = t5*t78 + p[13];
     M[8] = p[13] + (1.0/4.0)*p[3]*p[3]*p[6];
-    M[1] = M[3];
-    M[2] = M[6];
-    M[5] = M[7];
 }

@@ -503,7 +503,7 @@ def generate(eqs: Equations, module_name: str, key: str,
     out = cse.outputs
     blocks = {
         "mass_matrix": kernels.block("mass_matrix", out["mass_matrix"],
-                                     [f"M[{r * n + s}]" for r, s in lower]),
+                                     [_symmetric_target("M", n, r, s) for r, s in lower]),
         "forcing": kernels.block("forcing", out["forcing"], [f"F[{r}]" for r in range(n)]),
         "inverse_dynamics": kernels.block("inverse_dynamics", out["inverse_dynamics"],
                                           [f"tau[{r}]" for r in range(n)]),
@@ -535,7 +535,6 @@ def generate(eqs: Equations, module_name: str, key: str,
         "tree": info.bodies,
         "frame_bodies": [body for _, body, _ in info.frames],
         "frame_names": [c_identifier(name) for name, _, _ in info.frames],
-        "lower": lower,
         "ldlt": ldlt_plan(n, zero),
         "blocks": blocks,
         "stages": stages,
@@ -565,6 +564,15 @@ def generate(eqs: Equations, module_name: str, key: str,
         files[name] = f"/* {context['header']} (copied from gagen's templates) */\n" + text
     return GeneratedCode(files=files, ops_before=cse.ops_before, ops_after=cse.ops_after,
                          cse_seconds=cse.seconds, module_name=module_name, ident=ident)
+
+
+def _symmetric_target(array: str, n: int, r: int, s: int) -> str:
+    """The C target of entry (r, s) of a symmetric n x n array: both triangles at once
+    (copying the upper from the lower afterwards reads every entry back, and the
+    compiler's alias analysis of those copies grows with their square)."""
+    if r == s:
+        return f"{array}[{r * n + s}]"
+    return f"{array}[{s * n + r}] = {array}[{r * n + s}]"
 
 
 def _configuration_entries(model) -> list[int]:
