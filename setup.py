@@ -1,5 +1,7 @@
-"""Build the shipped models' generated sources (generated/<model>/) into gagen.shipped."""
+"""gagen's compiled runtime (gagen.runtime._native, Cython) and the shipped models' generated
+sources (generated/<model>/, plain C) as gagen.shipped.<module>."""
 
+import re
 from pathlib import Path
 
 import numpy
@@ -7,26 +9,36 @@ from Cython.Build import cythonize
 from setuptools import Extension, setup
 
 HERE = Path(__file__).parent
+TEMPLATES_C = HERE / "src" / "gagen" / "codegen" / "templates" / "c"
 
 
-def shipped_extensions():
+def relative(path: Path) -> str:
+    return str(path.relative_to(HERE))
+
+
+def runtime_extension() -> Extension:
+    """The runtime every model's module is used through (it reads their gagen_api.h tables)."""
+    return Extension("gagen.runtime._native", [relative(HERE / "src/gagen/runtime/_native.pyx")],
+                     include_dirs=[relative(TEMPLATES_C), numpy.get_include()],
+                     define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
+                     extra_compile_args=["-O3"])
+
+
+def shipped_extensions() -> list[Extension]:
+    """A model's module from its committed sources: its C files, module.c naming the module."""
     extensions = []
     for folder in sorted((HERE / "generated").glob("*/")):
-        pyx = sorted(folder.glob("gagen_*.pyx"))
-        if len(pyx) != 1:
+        init = folder / "module.c"
+        found = re.search(r"PyInit_(gagen_\w+)\(", init.read_text()) if init.exists() else None
+        if found is None:
             continue
-        module = pyx[0].stem
-        # the model's C files (gagen.codegen.MODEL_C_FILES), not Cython's output
-        sources = [pyx[0]] + sorted(f for f in folder.glob("*.c")
-                                    if not f.name.startswith("gagen_"))
+        # the model's C files (gagen.codegen.render's MODEL_C_FILES and module.c)
+        sources = sorted(f for f in folder.glob("*.c") if not f.name.startswith("gagen_"))
         extensions.append(Extension(
-            f"gagen.shipped.{module}",
-            [str(s.relative_to(HERE)) for s in sources],
-            include_dirs=[str(folder.relative_to(HERE)), numpy.get_include()],
-            define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
-            extra_compile_args=["-O3"],
-        ))
+            f"gagen.shipped.{found.group(1)}", [relative(s) for s in sources],
+            include_dirs=[relative(folder)], extra_compile_args=["-O3"]))
     return extensions
 
 
-setup(ext_modules=cythonize(shipped_extensions(), language_level=3, quiet=True))
+setup(ext_modules=[*cythonize([runtime_extension()], language_level=3, quiet=True),
+                   *shipped_extensions()])

@@ -14,6 +14,7 @@ from interrupting import seconds_to_stop
 import gagen
 from gagen import ComputedTorque, Eq11Trajectory
 from gagen.building.cache import cached_module_is_intact, install_received_module
+from gagen.runtime import _native
 from gagen.sim.distributed import ModulePayload
 
 N = 6
@@ -126,7 +127,7 @@ def test_a_failing_run_is_reported_and_leaves_the_others_alone(rrr):
                            p=_per_run_p(p, i), max_steps=2000)
         assert res.message[i] == str(info.value)
         # the samples as the compiled integrator leaves them: NaN where not reached
-        sim = rrr.module.CompiledSimulation(rrr.kernels, rrr.parameter_vector(_per_run_p(p, i)),
+        sim = _native.CompiledSimulation(rrr.kernels, rrr.parameter_vector(_per_run_p(p, i)),
                                             **stiff[i].c_spec(3))
         q, qd, tau, status, _ = sim.run("dopri5", 0.0, 1.0, Q0[i], np.zeros(3), res.t,
                                         max_steps=2000)

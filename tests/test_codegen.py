@@ -16,7 +16,7 @@ from conftest import REPO
 
 import gagen
 from gagen.building.builder import build, generate_sources, module_name_for, source_key
-from gagen.codegen.render import COPIED_FILES, MODEL_C_FILES, generate
+from gagen.codegen.render import COPIED_FILES, MODEL_C_FILES, MODULE_FILE, generate
 from gagen.model.modelfile import parse_model_text
 from gagen.sim.controllers import paper_controller
 from gagen.sim.simulate import simulate
@@ -37,7 +37,7 @@ def rrr_code():
 def test_generated_rrr_matches_golden_files():
     code = rrr_code()
     if os.environ.get("GAGEN_UPDATE_GOLDEN"):
-        for old in GOLDEN.glob("gagen_*.pyx"):
+        for old in GOLDEN.glob("gagen_*.pyx"):  # the Cython wrapper of older gagens
             old.unlink()
         GOLDEN.mkdir(parents=True, exist_ok=True)
         for name, text in code.files.items():
@@ -272,7 +272,7 @@ def test_compiler_errors_are_shown(tmp_path, monkeypatch):
 def test_sources_only_generation_writes_every_file(tmp_path):
     report = generate_sources(gagen.resolve_model("rrr"), tmp_path)
     names = {p.name for p in tmp_path.iterdir()}
-    assert {*MODEL_C_FILES, *COPIED_FILES, "rrr.h", f"{report.module_name}.pyx"} == names
+    assert {*MODEL_C_FILES, *COPIED_FILES, "rrr.h", MODULE_FILE} == names
     assert report.ops_after_cse < report.ops_before_cse
 
 
@@ -301,3 +301,48 @@ def test_the_codegen_config_chooses_libm_trig_and_inlining():
     assert " = sin(q[" in plain["rhs.c"]
     assert "always_inline" in fast["simulation.c"]
     assert "always_inline" not in plain["simulation.c"]
+
+
+def test_a_mostly_zero_mass_matrix_is_cleared_at_once_and_still_exact(tmp_path):
+    """A branching tree's M is mostly structural zeros: mass_matrix() clears M with one
+    memset and writes the other entries (both triangles); a chain's M has no zeros and is
+    written entry by entry. Either way M is exactly symmetric, with its zeros exact, and
+    equals the lambdify backend's."""
+    from gagen.codegen.render import zero_fills_mass_matrix
+
+    assert zero_fills_mass_matrix(4, 3) and not zero_fills_mass_matrix(4, 2)
+    generate_sources(gagen.resolve_model("chain:3"), tmp_path / "chain")
+    assert "memset" not in (tmp_path / "chain" / "mass_matrix.c").read_text()
+    text = textwrap.dedent("""
+        name: fork
+        gravity: [0, 0, -g]
+        parameters: {g: 9.81}
+        bodies:
+          - {name: base, parent: world, mass: 2.0, com: [0.1, 0, 0],
+             inertia: [0.1, 0.1, 0.1, 0, 0, 0],
+             joint: {name: j0, type: revolute, axis: [0, 0, 1]}}
+          - {name: left, parent: base, mass: 1.0, com: [0, 0.2, 0],
+             inertia: [0.02, 0.03, 0.04, 0, 0, 0],
+             joint: {name: j1, type: revolute, axis: [1, 0, 0], origin: {xyz: [0.3, 0.2, 0]}}}
+          - {name: right, parent: base, mass: 1.5, com: [0.2, 0, 0.1],
+             inertia: [0.05, 0.02, 0.03, 0, 0, 0],
+             joint: {name: j2, type: revolute, axis: [0, 1, 0], origin: {xyz: [0.3, -0.2, 0]}}}
+          - {name: left2, parent: left, mass: 0.5, com: [0, 0.1, 0],
+             inertia: [0.01, 0.01, 0.01, 0, 0, 0],
+             joint: {name: j3, type: prismatic, axis: [0, 1, 0], origin: {xyz: [0, 0.4, 0]}}}
+          - {name: right2, parent: right, mass: 0.7, com: [0.1, 0, 0],
+             inertia: [0.01, 0.02, 0.01, 0, 0, 0],
+             joint: {name: j4, type: revolute, axis: [0, 0, 1], origin: {xyz: [0.4, 0, 0]}}}
+    """)
+    path = tmp_path / "fork.yaml"
+    path.write_text(text)
+    generate_sources(gagen.resolve_model(str(path)), tmp_path / "fork")
+    assert "memset(M, 0" in (tmp_path / "fork" / "mass_matrix.c").read_text()
+    compiled = gagen.load(str(path), cache_dir=tmp_path / "cache")
+    reference = gagen.load(str(path), backend="lambdify")
+    Q = np.random.default_rng(3).normal(size=(5, 5))
+    M = compiled.mass_matrix(Q)
+    np.testing.assert_allclose(M, reference.mass_matrix(Q), rtol=1e-12, atol=1e-14)
+    assert np.array_equal(M, np.transpose(M, (0, 2, 1)))
+    zero = np.abs(reference.mass_matrix(Q[0])) == 0
+    assert zero.sum() >= 8 and np.all(M[:, zero] == 0)

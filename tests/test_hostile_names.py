@@ -1,7 +1,7 @@
 """Hostile text in a description is data, never code (issue 11, classes 1, 2 and 4).
 
 Every text field of a model file and of a URDF is filled with injection payloads: Python
-that would run if it ended a docstring or a comment of the generated Cython module, C that
+that would run if it ended a docstring or a comment of generated Python, C that
 would compile if it ended a comment, paths that would escape the output folder, names that
 would shadow gagen's own symbols, files and headers. Each test asserts that nothing ran, that
 no payload reached the generated sources, and that the numbers equal those of the same robot
@@ -119,10 +119,8 @@ def assert_same_dynamics(ours, plain, renamed: dict[str, str]) -> None:
 
 def generated_text(dyn) -> str:
     folder = Path(dyn.module.__file__).parent
-    cython_output = Path(dyn.module.__file__).name.split(".")[0] + ".c"
     return "\n".join(p.read_text(errors="replace") for p in sorted(folder.iterdir())
-                     if p.suffix in (".c", ".h", ".pyx", ".py", ".json") and p.is_file()
-                     and p.name != cython_output)
+                     if p.suffix in (".c", ".h", ".pyx", ".py", ".json") and p.is_file())
 
 
 def assert_names_only_as_identifiers(dyn, names: list[str]) -> None:

@@ -15,6 +15,7 @@ import pytest
 import gagen
 from gagen.app.cli import main
 from gagen.app.figures import arm_points, body_frames, rrr_points
+from gagen.runtime import _native
 from gagen.runtime.dynamics import SingularMassMatrixError
 from gagen.sim.controllers import (
     PD,
@@ -248,7 +249,7 @@ def test_c_controllers_match_python_controllers(rrr):
     y = rng.normal(size=(7, 6))
     for ctrl in (paper_controller(), PD(kp=10, kd=2, target=0.3),
                  ComputedTorque(Eq11Trajectory.paper(), kp=[50, 60, 70], kd=[8, 9, 10])):
-        sim = rrr.module.CompiledSimulation(rrr.kernels, None, **ctrl.c_spec(3))
+        sim = _native.CompiledSimulation(rrr.kernels, None, **ctrl.c_spec(3))
         tau_c, status = sim.torques(t, y)
         assert status == 0
         np.testing.assert_allclose(tau_c, ctrl.bind(rrr)(t, y[:, :3], y[:, 3:]),

@@ -15,6 +15,7 @@ import pytest
 from random_trees import random_model
 
 import gagen
+from gagen.runtime import _native
 from gagen.runtime.dynamics import SingularMassMatrixError
 from gagen.sim.controllers import PD, ComputedTorque
 from gagen.sim.simulate import simulate
@@ -124,7 +125,7 @@ def test_controller_torques_match_the_python_controllers(models, name):
     for kind, ctrl in controllers(dyn).items():
         if ctrl is None:
             continue
-        sim = dyn.module.CompiledSimulation(dyn.kernels, None, **ctrl.c_spec(n))
+        sim = _native.CompiledSimulation(dyn.kernels, None, **ctrl.c_spec(n))
         tau, status = sim.torques(t, y)
         assert status == 0
         want = ctrl.bind(dyn)(t, y[:, :n], y[:, n:])
@@ -166,7 +167,7 @@ def test_a_mass_matrix_failing_mid_run_stops_the_simulation(cache_dir, method):
     p = folding_inertia(rrr)
     pd = PD(kp=[500, 300, 200], kd=[300, 150, 100], target=np.radians([-60, -60, -30]))
     te = np.linspace(0.0, 5.0, 501)
-    sim = rrr.module.CompiledSimulation(rrr.kernels, rrr.parameter_vector(p), **pd.c_spec(3))
+    sim = _native.CompiledSimulation(rrr.kernels, rrr.parameter_vector(p), **pd.c_spec(3))
     q, _, tau, status, _ = sim.run(method, 0.0, 5.0, np.zeros(3), np.zeros(3), te)
     assert status == 1  # <model>_ERR_NOT_POSITIVE_DEFINITE
     reached = ~np.isnan(q).any(axis=1)
@@ -188,7 +189,7 @@ def test_bad_controllers_are_refused_by_the_c_code(cache_dir):
     rrr = gagen.load("rrr", cache_dir=cache_dir)
     te = np.linspace(0.0, 1.0, 3)
     for spec in ({"kind": 7}, {"kind": -1}):
-        sim = rrr.module.CompiledSimulation(rrr.kernels, None, **spec)
+        sim = _native.CompiledSimulation(rrr.kernels, None, **spec)
         for method in ("dopri5", "rk4"):
             q, _, _, status, _ = sim.run(method, 0.0, 1.0, np.zeros(3), np.zeros(3), te)
             assert status == -103 and np.isnan(q).all()  # GAGEN_ERR_BAD_ARG

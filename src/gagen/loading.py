@@ -25,10 +25,11 @@ def load(model="rrr", backend: str = "compiled", strict: bool = False,
     `gagen.InertiaWarning`; `strict=True` refuses it. `floating_base=True` lets a URDF's
     root link move freely (Pinocchio's FreeFlyer: q = [x, y, z, qx, qy, qz, qw, joints],
     velocities [linear, angular (both in the base frame), joints]; see `Dynamics.configuration`
-    and `Dynamics.coordinates`). `backend` is "compiled" (generated C through
-    Cython, built on first use and cached) or "lambdify" (SymPy's lambdify, no compiler).
+    and `Dynamics.coordinates`). `backend` is "compiled" (generated C, built
+    on first use and cached) or "lambdify" (SymPy's lambdify, no compiler).
     Options of the compiled backend: `cache_dir`, `fast_math`, `verbose` (show the build's
-    progress), `portable` (one version of the kernels for any CPU, no FMA clone),
+    progress), `portable` (kernels for any CPU of the architecture: by default
+    they are compiled for this CPU's fused multiply-add where it has it),
     `derivatives` (build the derivative module now rather than on the first call of a
     derivative method: it is a second module, so the default build stays as fast). Both
     backends take `derivation`: "auto" (default: the paper's Gibbs-Appell form up to 5

@@ -251,7 +251,8 @@ def _bench_arguments(p: argparse.ArgumentParser) -> None:
                    help="output folder for report.md, results.json and the plots "
                    "(default: %(default)s)")
     p.add_argument("--full", action="store_true",
-                   help="the complete study: chain:2 ... chain:12, UR5 and Panda")
+                   help="the complete study, in tens of minutes (the sections it adds "
+                   "are listed above)")
     p.add_argument("--urdf-dir", metavar="DIR",
                    help="folder holding ur5_robot.urdf and panda.urdf (default: "
                    "$GAGEN_URDF_DIR, else ../shared/urdf next to the repository)")
@@ -494,8 +495,8 @@ IDENTIFY_DESCRIPTION = (
 COMMANDS: dict[str, Command] = {
     "build": Command(
         build_command, "derive, generate C and compile a model", _build_arguments,
-        "Derive the Gibbs-Appell equations, generate C with CSE and compile it through "
-        "Cython. Shows each stage with its time and prints the operation counts before and "
+        "Derive the Gibbs-Appell equations, generate C with CSE and compile it into an "
+        "extension module. Shows each stage with its time and prints the operation counts before and "
         "after CSE."),
     "info": Command(info_command, "show a model's coordinates, parameters and API", _info_arguments),
     "simulate": Command(simulate_command,

@@ -1,5 +1,5 @@
 """A cold build in a fresh process, measured from outside: wall time, stage times and the
-peak memory of the whole process tree (Python, Cython and the compilers running at once).
+peak memory of the whole process tree (Python and the compilers running at once).
 
 `python -m gagen.bench.coldbuild MODEL CACHE_DIR [--derivatives]` builds one model (or its
 derivative module) into a cache folder and prints one JSON line: the build report (stages,

@@ -16,9 +16,12 @@ and a note: the section then compares with Pinocchio from Python only.
 
 from __future__ import annotations
 
+import hashlib
 import json
+import os
 import shutil
 import subprocess
+import tempfile
 from pathlib import Path
 
 HARNESS = r"""
@@ -119,7 +122,10 @@ def cmeel_prefix() -> Path | None:
 
 
 def build_harness(folder: Path) -> tuple[Path | None, str]:
-    """Compile the harness into `folder`; (its path, "") or (None, why not)."""
+    """The compiled harness, (its path, "") or (None, why not). Pinocchio's headers take
+    minutes to compile, so the binary is kept in `folder` under a hash of what it is built
+    from (the source, the command, Pinocchio's headers' place and version, the compiler's
+    version) and reused by later runs."""
     prefix = cmeel_prefix()
     if prefix is None:
         return None, "Pinocchio's C++ headers were not found (pip install pin)"
@@ -128,17 +134,40 @@ def build_harness(folder: Path) -> tuple[Path | None, str]:
     compiler = shutil.which("g++") or shutil.which("c++") or shutil.which("clang++")
     if compiler is None:
         return None, "no C++ compiler"
-    folder.mkdir(parents=True, exist_ok=True)
-    source, binary = folder / "pinocchio_harness.cpp", folder / "pinocchio_harness"
-    source.write_text(HARNESS)
     lib = prefix / "lib"
-    command = [compiler, "-O3", "-DNDEBUG", "-march=native", "-std=c++17", *DEFINES,
-               f"-I{prefix / 'include'}", f"-I{prefix / 'include' / 'eigen3'}", str(source),
-               "-o", str(binary), f"-L{lib}", "-lboost_serialization", f"-Wl,-rpath,{lib}"]
-    result = subprocess.run(command, capture_output=True, text=True, check=False)
-    if result.returncode != 0:
-        return None, "the C++ harness did not compile: " + result.stderr.strip()[-300:]
+    flags = ["-O3", "-DNDEBUG", "-march=native", "-std=c++17", *DEFINES,
+             f"-I{prefix / 'include'}", f"-I{prefix / 'include' / 'eigen3'}"]
+    links = [f"-L{lib}", "-lboost_serialization", f"-Wl,-rpath,{lib}"]
+    binary = folder / f"pinocchio_harness-{_harness_key(compiler, flags + links)[:16]}"
+    if binary.is_file() and os.access(binary, os.X_OK):
+        return binary, ""
+    folder.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=folder) as tmp:
+        source, built = Path(tmp) / "pinocchio_harness.cpp", Path(tmp) / "harness"
+        source.write_text(HARNESS)
+        result = subprocess.run([compiler, *flags, str(source), "-o", str(built), *links],
+                                capture_output=True, text=True, check=False)
+        if result.returncode != 0:
+            return None, "the C++ harness did not compile: " + result.stderr.strip()[-300:]
+        os.replace(built, binary)  # whole or not at all, for the next run to find
     return binary, ""
+
+
+def harness_folder() -> Path:
+    """Where compiled harnesses are kept between runs: gagen's cache folder."""
+    from ..building.cache import default_cache_dir, usable_cache_dir
+
+    return usable_cache_dir(default_cache_dir()) / "bench-pinocchio-cpp"
+
+
+def _harness_key(compiler: str, arguments: list[str]) -> str:
+    """A hash of what the harness binary depends on."""
+    import pinocchio
+
+    version = subprocess.run([compiler, "--version"], capture_output=True, text=True,
+                             check=False).stdout
+    parts = [HARNESS, compiler, version, pinocchio.__version__, *arguments]
+    return hashlib.sha256("\0".join(parts).encode()).hexdigest()
 
 
 def cpp_times(binary: Path, pinocchio_model, folder: Path, states: int = 1000,

@@ -262,7 +262,7 @@ def markdown(results: dict, images: dict | None = None) -> str:
     lines += _section(
         results, "scaling", "Scaling: build and call time against the robot's size",
         "Cold builds, each in a fresh process and cache folder: derive, generate and "
-        "compile (Cython and the C compiler, as many at once as there are cores) as "
+        "compile (the C compiler, as many at once as there are cores) as "
         "`gagen.building.build` reports them, the build's wall time and the peak memory of "
         "its process tree. Then, per model, gagen's forward dynamics, inverse dynamics and "
         "mass matrix per call from Python against Pinocchio's `aba`, `rnea` and `crba` "

@@ -1,8 +1,8 @@
 """How build time, memory and call time grow with the robot, against Pinocchio.
 
 For each model: a cold build in a fresh process (a new cache folder), timed stage by
-stage as `gagen.building.build` reports it (derive; generate; compile: Cython and the C
-compiler, in parallel), with its wall time and the peak memory of the whole process tree
+stage as `gagen.building.build` reports it (derive; generate; compile: the C compiler, in
+parallel), with its wall time and the peak memory of the whole process tree
 (gagen.bench.coldbuild); then the module is loaded and forward dynamics, inverse dynamics
 and the mass matrix are timed per call from Python against Pinocchio's `aba`, `rnea` and
 `crba` (interleaved), and per state in gagen's batched C loop (1000 stacked states),
@@ -171,11 +171,11 @@ def scaling_rows(models, cache_dir, repeats: int = REPEATS, target: float = DEFA
         resolve_model(name)
     harness, why = (None, "")
     if cpp:
-        from .pinocchio_cpp import build_harness
+        from .pinocchio_cpp import build_harness, harness_folder
 
         if progress:
-            progress("compiling the Pinocchio C++ harness (a minute or two)")
-        harness, why = build_harness(Path(cache_dir) / "pinocchio-cpp")
+            progress("the Pinocchio C++ harness (compiled once, a few minutes, then reused)")
+        harness, why = build_harness(harness_folder())
         if harness is None and progress:
             progress(f"no C++ peer: {why}")
     rows = []

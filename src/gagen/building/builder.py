@@ -16,7 +16,6 @@ import shlex
 import shutil
 import socket
 import subprocess
-import sys
 import sysconfig
 import tempfile
 import time
@@ -115,7 +114,7 @@ class Progress:
         self.say(f"{name:<9} {seconds:7.2f} s{extra}")
 
     def files(self, done: int, total: int) -> None:
-        """A compile job finished (Cython's, or one C file's)."""
+        """A compile job (one C file) finished."""
         self.say(f"compiled {done}/{total}")
 
     def say(self, text: str) -> None:
@@ -207,13 +206,11 @@ def _compile_commands(cc: list[str], folder: Path, sources: list[str],
     them; "." is not on the include path, so a model header cannot shadow a system
     header (a model named `math`).
     """
-    import numpy
-
-    includes = [f"-I{numpy.get_include()}", f"-I{sysconfig.get_paths()['include']}"]
+    includes = [f"-I{sysconfig.get_paths()['include']}"]
     # Python's -g would make the compiler write debug information for very large functions
     python_flags = [w for w in _config_words("CFLAGS") if w != "-g"]
     base = [*cc, *python_flags, *_config_words("CCSHARED"), *_env_words("CPPFLAGS"),
-            *_env_words("CFLAGS"), *includes, "-DNPY_NO_DEPRECATED_API=NPY_1_7_API_VERSION"]
+            *_env_words("CFLAGS"), *includes]
 
     def size(name: str) -> int:
         path = folder / name
@@ -224,8 +221,8 @@ def _compile_commands(cc: list[str], folder: Path, sources: list[str],
 
 
 def _c_files(folder: Path) -> list[str]:
-    """Every C file of a build folder: Cython's output, the model's kernels (their number
-    grows with the model: codegen/segments.py) and gagen's integrator."""
+    """Every C file of a build folder: the module's table (module.c), the model's kernels
+    (their number grows with the model: codegen/segments.py) and gagen's integrator."""
     return sorted(path.name for path in folder.glob("*.c"))
 
 
@@ -309,23 +306,21 @@ def _chain_length(job: Job) -> int:
 
 def compile_sources(folder: Path, module_name: str, flags: list[str], verbose: bool,
                     progress=None) -> Path:
-    """Cythonize and compile the sources in `folder`; return the module's path.
+    """Compile the C sources in `folder` into the extension module `module_name`; return
+    the module's path.
 
-    Cython runs as `python -m cython` while the compiler (the one Python was built with,
-    or $CC) starts on the model's C files, as many at a time as there are cores; Cython's
-    output is compiled as soon as it is written. Then the objects are linked. A failure
-    raises BuildError with the tool's own messages, never a traceback of gagen's.
+    The compiler (the one Python was built with, or $CC) runs on the C files, as many at a
+    time as there are cores, then links the objects. The module is plain C: its kernels
+    and their table (module.c), which gagen's runtime (gagen.runtime._native, compiled
+    when gagen was installed) calls through, so no Cython runs here. A failure raises
+    BuildError with the tool's own messages, never a traceback of gagen's.
     `progress(done, total)` is called as files are compiled.
     """
     cc = check_compiler()
     suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
-    wrapper = f"{module_name}.c"
-    compile_jobs = {source: Job(command, f"compiling {module_name}") for source, command in
-                    _compile_commands(cc, folder, [*_c_files(folder), wrapper], flags).items()}
-    cython = Job([sys.executable, "-m", "cython", "-3", "--fast-fail", f"{module_name}.pyx",
-                  "-o", wrapper], f"Cython on {module_name}.pyx", then=compile_jobs.pop(wrapper))
-    _run_jobs([cython, *compile_jobs.values()], folder, workers=build_workers(),
-              progress=progress)
+    compile_jobs = [Job(command, f"compiling {module_name}") for command in
+                    _compile_commands(cc, folder, _c_files(folder), flags).values()]
+    _run_jobs(compile_jobs, folder, workers=build_workers(), progress=progress)
     _run_jobs([Job(_link_command(cc, folder, module_name, suffix), f"linking {module_name}")],
               folder)
     path = folder / f"{module_name}{suffix}"
@@ -386,8 +381,8 @@ def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
         (tmp / _OWNER_FILE).write_text(f"{socket.gethostname()} {os.getpid()}\n")
         generate_sources(model, tmp, progress, report, derivation, config, derivatives)
         workers = build_workers()
-        progress.say(f"compiling with {' '.join(flags)} (Cython and the C compiler, "
-                     f"{workers} at a time)...")
+        progress.say(f"compiling with {' '.join(flags)} (the C compiler, {workers} at a "
+                     "time)...")
         start = time.perf_counter()
         module = compile_sources(tmp, name, flags, verbose, progress=progress.files)
         if out is None:  # the cache checks its modules before import; an --out folder is the user's

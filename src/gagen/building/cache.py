@@ -24,7 +24,7 @@ import tempfile
 import time
 import warnings
 from functools import cache as _memoized
-from importlib import metadata, resources
+from importlib import resources
 from pathlib import Path
 
 from .. import __version__
@@ -104,17 +104,15 @@ def native_fma_flags() -> tuple[str, ...]:
 
 
 def build_key(src_key: str, flags: list[str]) -> str:
-    """Hash of the sources plus what the binary depends on: flags, Python ABI, NumPy, Cython."""
+    """Hash of the sources plus what the binary depends on: flags and Python's ABI."""
     return _hash(src_key, " ".join(flags), *_binary_interface())
 
 
 @_memoized
 def _binary_interface() -> tuple[str, ...]:
-    """What a compiled module depends on besides its sources (read without importing Cython)."""
-    import numpy
-
-    return (sysconfig.get_config_var("EXT_SUFFIX") or "", numpy.__version__,
-            metadata.version("Cython"), sys.version)
+    """What a compiled module depends on besides its sources: Python's ABI (the module is
+    plain C; NumPy and Cython are in gagen's runtime, gagen.runtime._native, not in it)."""
+    return (sysconfig.get_config_var("EXT_SUFFIX") or "", sys.version)
 
 
 def _hash(*parts: str | bytes) -> str:

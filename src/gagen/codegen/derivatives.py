@@ -64,7 +64,9 @@ DERIVATIVE_KERNEL_ARRAYS = {
 # Every one of them runs in loops (stacked inputs, MPC): built with the FMA clone too.
 DERIVATIVE_LOOPED_KERNELS = tuple(DERIVATIVE_KERNEL_ARRAYS)
 # gagen's files that the derivative module's C needs next to it
-DERIVATIVE_COPIED_FILES = ("gagen_math.h",)
+DERIVATIVE_COPIED_FILES = ("gagen_math.h", "gagen_api.h", "integrator.h")
+# the derivative module's one file that speaks to Python: its kernels' table
+DERIVATIVE_MODULE_FILE = "derivatives_module.c"
 
 
 @dataclass
@@ -134,9 +136,9 @@ def _blocks(deq: DerivativeEquations, kernels: _Kernels) -> DerivativeBlocks:
 def generate_derivatives(deq: DerivativeEquations, module_name: str, key: str,
                          equations_key: str, config: CodegenConfig | None = None
                          ) -> GeneratedCode:
-    """The C sources, header and Cython wrapper of a model's derivative module (file name
-    -> text). `equations_key` is the source key of the model's main module: the wrapper
-    carries it, so the runtime pairs the two modules of the same equations only."""
+    """The C sources and header of a model's derivative module and the module's table of
+    them (file name -> text). `equations_key` is the source key of the model's main module:
+    the module carries it, so the runtime pairs the two modules of the same equations only."""
     config = config or CodegenConfig()
     eqs = deq.equations
     ident = c_identifier(eqs.model.name)
@@ -166,7 +168,7 @@ def generate_derivatives(deq: DerivativeEquations, module_name: str, key: str,
     files = {
         f"{ident}_derivatives.h": env.get_template("model/derivatives.h.j2").render(context),
         "derivatives.c": env.get_template("model/derivatives.c.j2").render(context),
-        f"{module_name}.pyx": env.get_template("cython/derivatives.pyx.j2").render(context),
+        DERIVATIVE_MODULE_FILE: env.get_template("model/derivatives_module.c.j2").render(context),
     }
     # kernels.c.j2 includes "<ident>.h": here the segment files include this module's header
     segment_context = {"header": header, "ident": f"{ident}_derivatives"}

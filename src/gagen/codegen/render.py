@@ -37,10 +37,12 @@ from .stages import StageSplit, split_stages
 
 # copied verbatim next to the generated sources (templates/c/)
 COPIED_FILES = ("integrator.c", "integrator.h", "gagen_ode.h", "gagen_second_order.h",
-                "gagen_math.h")
-# the C files of a model, all compiled into its module
+                "gagen_math.h", "gagen_api.h")
+# the C files of a model, all compiled into its module (plain C, usable without Python)
 MODEL_C_FILES = ("mass_matrix.c", "rhs.c", "simulation.c", "inverse_dynamics.c", "frames.c",
                  "regressor.c", "integrator.c")
+# the module's one file that speaks to Python: the kernels' table for gagen's runtime
+MODULE_FILE = "module.c"
 _C_KEYWORDS = frozenset({
     "auto", "break", "case", "char", "const", "continue", "default", "do", "double", "else",
     "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register",
@@ -53,7 +55,8 @@ _C_KEYWORDS = frozenset({
 # its C functions and macros, so it must not be one of gagen's file names, start like
 # gagen's own symbols (gagen_so_*, GAGEN_*), or be a C keyword. (System headers cannot be
 # shadowed: the build folder is never on the include path, every local include is quoted.)
-_GAGEN_FILE_STEMS = frozenset(Path(f).stem.lower() for f in COPIED_FILES + MODEL_C_FILES)
+_GAGEN_FILE_STEMS = frozenset(Path(f).stem.lower()
+                              for f in (*COPIED_FILES, *MODEL_C_FILES, MODULE_FILE))
 RESERVED_PREFIX = "model_"
 
 
@@ -485,7 +488,8 @@ def model_context(eqs: Equations) -> dict:
 
 def generate(eqs: Equations, module_name: str, key: str,
              config: CodegenConfig | None = None) -> GeneratedCode:
-    """Generate the C sources, header and Cython wrapper of a model (file name -> text).
+    """Generate the C sources and header of a model and its module's table of them
+    (module.c, for gagen's runtime), as file name -> text.
 
     The regressor's kinematics (symbolic.regressor.regressor_kinematics) continue the
     program after the frames' kinematics."""
@@ -501,9 +505,14 @@ def generate(eqs: Equations, module_name: str, key: str,
     n = eqs.n
     lower = [(r, s) for r in range(n) for s in range(r + 1)]
     out = cse.outputs
+    zero = {(r, s) for (r, s), e in zip(lower, out["mass_matrix"]) if e == 0}
+    zero_fill = zero_fills_mass_matrix(n, len(zero))
+    mass_entries = [(r, s, e) for (r, s), e in zip(lower, out["mass_matrix"])
+                    if not (zero_fill and (r, s) in zero)]
     blocks = {
-        "mass_matrix": kernels.block("mass_matrix", out["mass_matrix"],
-                                     [_symmetric_target("M", n, r, s) for r, s in lower]),
+        "mass_matrix": kernels.block("mass_matrix", [e for _, _, e in mass_entries],
+                                     [_symmetric_target("M", n, r, s)
+                                      for r, s, _ in mass_entries]),
         "forcing": kernels.block("forcing", out["forcing"], [f"F[{r}]" for r in range(n)]),
         "inverse_dynamics": kernels.block("inverse_dynamics", out["inverse_dynamics"],
                                           [f"tau[{r}]" for r in range(n)]),
@@ -517,7 +526,6 @@ def generate(eqs: Equations, module_name: str, key: str,
     }
     stages = _stages(eqs, kernels, config.inline_stage_ops)
     info = ModelInfo.from_model(model)
-    zero = {(r, s) for (r, s), e in zip(lower, out["mass_matrix"]) if e == 0}
     context = {
         **model_context(eqs),
         "nreg": len(regressor_parameters(model)),
@@ -536,6 +544,7 @@ def generate(eqs: Equations, module_name: str, key: str,
         "frame_bodies": [body for _, body, _ in info.frames],
         "frame_names": [c_identifier(name) for name, _, _ in info.frames],
         "ldlt": ldlt_plan(n, zero),
+        "zero_fill": zero_fill,
         "blocks": blocks,
         "stages": stages,
         "module_name": module_name,
@@ -554,7 +563,7 @@ def generate(eqs: Equations, module_name: str, key: str,
         "inverse_dynamics.c": env.get_template("model/inverse_dynamics.c.j2").render(context),
         "frames.c": env.get_template("model/frames.c.j2").render(context),
         "regressor.c": env.get_template("model/regressor.c.j2").render(context),
-        f"{module_name}.pyx": env.get_template("cython/wrapper.pyx.j2").render(context),
+        MODULE_FILE: env.get_template("model/module.c.j2").render(context),
     }
     kernels_template = env.get_template("model/kernels.c.j2")
     for k, segments in enumerate(kernel_files(kernels.segments, config.file_chars)):
@@ -564,6 +573,14 @@ def generate(eqs: Equations, module_name: str, key: str,
         files[name] = f"/* {context['header']} (copied from gagen's templates) */\n" + text
     return GeneratedCode(files=files, ops_before=cse.ops_before, ops_after=cse.ops_after,
                          cse_seconds=cse.seconds, module_name=module_name, ident=ident)
+
+
+def zero_fills_mass_matrix(n: int, zeros: int) -> bool:
+    """Whether mass_matrix() clears M with memset and then writes its non-zero entries only:
+    when more than a quarter of the lower triangle's entries are structural zeros (a
+    branching tree's), one vectorised fill of n*n doubles costs less than two scalar stores
+    per zero (Tiago: 48 coordinates, most of M zero)."""
+    return 4 * zeros > n * (n + 1) // 2
 
 
 def _symmetric_target(array: str, n: int, r: int, s: int) -> str:
@@ -582,13 +599,6 @@ def _configuration_entries(model) -> list[int]:
         joint = model.body(body).joint
         out += [-1] * 6 if joint.floating else [iq]
     return out
-
-
-def c_sources(files) -> list[str]:
-    """The C files of a model's sources that are compiled into its module (the model's
-    kernels and gagen's integrator; not Cython's output)."""
-    return sorted(name for name in files if name.endswith(".c")
-                  and not name.startswith("gagen_"))
 
 
 def write_sources(code: GeneratedCode, folder: Path) -> None:

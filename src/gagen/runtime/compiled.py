@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from ..errors import BuildError
 from ..manifest import ModelInfo
+from . import _native
 from .dynamics import Dynamics
 from .frames import frame_index
 
@@ -34,7 +35,8 @@ class CompiledDynamics(Dynamics):
         self._model_ref = model_ref
         self._derivatives = derivatives
         self.derivative_module = None
-        self.kernels = module.CompiledModel(self.parameter_vector, self.external_forces)
+        self.kernels = _native.CompiledModel(module.API, self.parameter_vector,
+                                             self.external_forces)
         for name in KERNEL_METHODS:
             setattr(self, name, getattr(self.kernels, name))
 
@@ -76,7 +78,7 @@ class CompiledDynamics(Dynamics):
                 f"the derivative module {module.__name__} was not built from the equations of "
                 f"{self.module.__name__} (its key {module.EQUATIONS_KEY[:12]}, expected "
                 f"{self.module.KEY[:12]})")
-        kernels = module.CompiledDerivatives(self.parameter_vector)
+        kernels = _native.CompiledDerivatives(module.API, self.parameter_vector)
         for name in DERIVATIVE_METHODS:
             setattr(self, name, getattr(kernels, name))
         self.derivative_module = module

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..runtime import _native
 from ..runtime.inputs import as_float_array
 from .simulate import (
     COMPILED_METHODS,
@@ -90,9 +91,6 @@ def prepare_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: st
                          f"one of {', '.join(COMPILED_METHODS)}, got {method!r}")
     rtol, atol = checked_tolerances(method, rtol, atol, nq + n)
     settings = compiled_settings(dyn, method, t0, t1, rtol, atol, t_eval, options)
-    if not hasattr(dyn.module, "CompiledBatch"):
-        raise ValueError(f"the compiled module of '{dyn.info.name}' was built by a gagen "
-                         "without batches: clear the cache entry to rebuild it")
     controllers = _controller_list(controller)
     runs = _run_count(q0=_rows_of(q0, 2), qd0=_rows_of(qd0, 2), p=_parameter_rows(p),
                       controller=None if controllers is None else len(controllers))
@@ -237,8 +235,8 @@ def run_plan(dyn, plan: BatchPlan, threads: int = 1, progress: Progress | None =
     qd, tau = (np.empty((runs, m, n)) for _ in range(2))
     stats = np.zeros((runs, 5), np.int64)
     c = plan.control
-    batch = dyn.module.CompiledBatch(
-        s.method, s.t0, s.t1, s.t_eval, s.rtol, s.atol, s.first_step, s.max_step,
+    batch = _native.CompiledBatch(
+        dyn.kernels, s.method, s.t0, s.t1, s.t_eval, s.rtol, s.atol, s.first_step, s.max_step,
         s.max_steps, s.h, plan.y0, plan.p, c["kind"], c["gravity_compensation"], c["kp"],
         c["kd"], c["target"], c["traj_q0"], c["traj_qf"], c["traj_Tp"], q, qd, tau, stats)
     _run_on_threads(batch, runs, threads, progress)

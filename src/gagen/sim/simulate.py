@@ -29,6 +29,7 @@ import numpy as np
 
 from ..errors import NonFiniteStateError, SingularMassMatrixError
 from ..manifest import FRICTION_WIDTH
+from ..runtime import _native
 from .controllers import Controller
 
 COMPILED_METHODS = ("dopri5", "rk4")
@@ -443,8 +444,7 @@ def compiled_settings(dyn, method: str, t0: float, t1: float, rtol: float, atol,
                       options: dict) -> CompiledSettings:
     """Check what a compiled integration needs (the compiled backend, the method's options,
     the time grid, the step sizes and budget) and gather it."""
-    module = getattr(dyn, "module", None)
-    if getattr(dyn, "backend", None) != "compiled" or not hasattr(module, "CompiledSimulation"):
+    if getattr(dyn, "backend", None) != "compiled" or not hasattr(dyn, "kernels"):
         raise ValueError(f"method '{method}' is gagen's compiled integrator and needs the "
                          f"compiled backend (gagen.load(model, backend='compiled')); this "
                          f"dynamics object uses the '{getattr(dyn, 'backend', '?')}' backend: "
@@ -514,7 +514,7 @@ def _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_e
     if wrenches is not None:
         spec = {**spec, "frames": wrenches[0], "wrenches": wrenches[1]}
     start = time.perf_counter()
-    sim = dyn.module.CompiledSimulation(dyn.kernels, pvec, **spec)
+    sim = _native.CompiledSimulation(dyn.kernels, pvec, **spec)
     q, qd, tau, status, info = settings.run(sim, q0, qd0)
     q = unit_quaternions(dyn, q)
     te = settings.t_eval

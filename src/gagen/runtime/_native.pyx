@@ -1,0 +1,931 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, initializedcheck=False
+# cython: cdivision=True, embedsignature=True
+"""gagen's compiled runtime: the Python face of every model's compiled kernels.
+
+Compiled once, when gagen is installed. A model's extension module (generated from
+codegen/templates/model/module.c.j2) holds only the model's C and a table of its functions
+(gagen_api.h), exported as the capsule `API`; the classes here call the kernels through
+that table. So a model's build compiles its own C and nothing else: no Cython, no NumPy
+headers, no wrapper of its own.
+
+gagen.runtime.compiled.CompiledDynamics binds CompiledModel's methods (their documentation
+is gagen.runtime.dynamics.Dynamics's); gagen.sim runs CompiledSimulation and CompiledBatch.
+"""
+
+import numpy as np
+cimport numpy as cnp
+from cpython.exc cimport PyErr_CheckSignals
+from cpython.pycapsule cimport PyCapsule_GetPointer
+from libc.math cimport NAN, isfinite
+from libc.stdint cimport int32_t, int64_t
+from libc.stdlib cimport free, malloc
+
+from gagen.errors import NonFiniteStateError, SingularMassMatrixError
+from gagen.runtime.inputs import as_float_array
+
+cnp.import_array()
+
+cdef extern from "integrator.h" nogil:
+    ctypedef struct gagen_ode_stats:
+        long nfev, nsteps, naccepted, nrejected
+        int status
+    ctypedef struct gagen_control:
+        int kind
+        const double *kp
+        const double *kd
+        const double *target
+        int gravity_compensation
+        const double *traj_q0
+        const double *traj_qf
+        double traj_Tp
+        int (*poll)(void *ctx) noexcept nogil
+        void *poll_ctx
+        const double *feedforward
+        int nframes
+        const int *frames
+        const double *wrenches
+    enum:
+        GAGEN_METHOD_DOPRI5
+        GAGEN_METHOD_RK4
+
+cdef extern from "gagen_api.h" nogil:
+    enum:
+        GAGEN_API_VERSION
+    ctypedef struct gagen_model_api:
+        int version
+        const char *ident
+        int nq, nv, nb, nf, np, nreg
+        int err_nonfinite
+        const double *parameter_defaults
+        void (*mass_matrix)(const double *q, const double *p, double *M) noexcept nogil
+        void (*forcing)(const double *q, const double *qd, const double *tau,
+                        const double *p, double *F) noexcept nogil
+        int (*forward_dynamics)(const double *q, const double *qd, const double *tau,
+                                const double *p, double *qdd) noexcept nogil
+        void (*inverse_dynamics)(const double *q, const double *qd, const double *qdd,
+                                 const double *p, double *tau) noexcept nogil
+        void (*energy)(const double *q, const double *qd, const double *p,
+                       double *TV) noexcept nogil
+        void (*gravity)(const double *q, const double *p, double *G) noexcept nogil
+        void (*placements)(const double *q, const double *p, double *X) noexcept nogil
+        void (*frame_offsets)(const double *p, double *F) noexcept nogil
+        int (*frame_placement)(const double *q, const double *p, int frame, double *R,
+                               double *pos) noexcept nogil
+        int (*frame_jacobian)(const double *q, const double *p, int frame,
+                              double *J) noexcept nogil
+        int (*frame_velocity)(const double *q, const double *qd, const double *p, int frame,
+                              double *v) noexcept nogil
+        void (*regressor)(const double *q, const double *qd, const double *qdd,
+                          const double *p, double *Y) noexcept nogil
+        void (*regressor_parameters)(const double *p, double *pi) noexcept nogil
+        int (*simulate)(int method, const gagen_control *c, const double *p, double t0,
+                        double t1, const double *y0, double rtol, const double *atol,
+                        double first_step, double max_step, long max_steps, double h,
+                        const double *t_eval, int n_eval, double *y_out,
+                        gagen_ode_stats *stats) noexcept nogil
+        int (*control_torques)(const gagen_control *c, const double *p, long m,
+                               const double *t, const double *y,
+                               double *tau) noexcept nogil
+    ctypedef struct gagen_derivatives_api:
+        int version
+        const char *ident
+        int nq, nv, np
+        int err_nonfinite
+        const double *parameter_defaults
+        void (*inverse_dynamics_derivatives)(const double *q, const double *qd,
+                                             const double *qdd, const double *p,
+                                             double *dtau_dq, double *dtau_dqd) noexcept nogil
+        void (*coriolis_matrix)(const double *q, const double *qd, const double *p,
+                                double *C) noexcept nogil
+        int (*forward_dynamics_derivatives)(const double *q, const double *qd,
+                                            const double *tau, const double *p,
+                                            double *dqdd_dq, double *dqdd_dqd,
+                                            double *Minv) noexcept nogil
+        int (*linearize)(const double *q, const double *qd, const double *tau,
+                         const double *p, double *A, double *B) noexcept nogil
+
+MODEL_CAPSULE = "gagen.model_api"
+DERIVATIVES_CAPSULE = "gagen.derivatives_api"
+
+
+cdef void *_table(object capsule, str name) except NULL:
+    """The kernel table a model's module exports as `API` (a capsule named `name`), checked
+    to be of this runtime's version."""
+    cdef void *table = PyCapsule_GetPointer(capsule, name.encode())
+    cdef int version = (<int *>table)[0]  # every table starts with its version
+    if version != GAGEN_API_VERSION:
+        raise ImportError(f"the compiled module's kernel table is version {version}, this "
+                          f"gagen's runtime reads version {GAGEN_API_VERSION}: rebuild it")
+    return table
+
+
+# --- inputs, shared by the model's kernels and its derivatives ----------------------------
+
+def _converted(x, name):
+    """The slow path (lists, other dtypes, non-contiguous arrays): gagen's one input check."""
+    return np.ascontiguousarray(as_float_array(x, name))
+
+
+cdef inline cnp.ndarray _state(object x, str name, Py_ssize_t size):
+    """x as a C-contiguous float64 array of shape (size,) or (rows, size)."""
+    cdef cnp.ndarray a
+    if type(x) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>x) == cnp.NPY_DOUBLE \
+            and cnp.PyArray_IS_C_CONTIGUOUS(<cnp.ndarray>x):
+        a = <cnp.ndarray>x
+    else:
+        a = _converted(x, name)
+    cdef int nd = cnp.PyArray_NDIM(a)
+    if nd == 1:
+        if cnp.PyArray_DIM(a, 0) == size:
+            return a
+    elif nd == 2:
+        if cnp.PyArray_DIM(a, 1) == size:
+            return a
+    raise ValueError(f"{name} must have shape ({size},) or (N, {size}); got {np.shape(a)}")
+
+
+cdef inline Py_ssize_t _rows(cnp.ndarray a, Py_ssize_t rows, str name) except -2:
+    """Combine the row count of one input with the others' (-1: not stacked)."""
+    if cnp.PyArray_NDIM(a) == 1:
+        return rows
+    cdef Py_ssize_t r = cnp.PyArray_DIM(a, 0)
+    if rows >= 0 and r != rows:
+        raise ValueError(f"{name} has {r} rows, the other inputs have {rows}")
+    return r
+
+
+cdef inline bint _all_finite(const double *x, Py_ssize_t n) noexcept:
+    cdef Py_ssize_t k
+    for k in range(n):
+        if not isfinite(x[k]):
+            return False
+    return True
+
+
+cdef inline double *_data(cnp.ndarray a) noexcept:
+    return <double *>cnp.PyArray_DATA(a)
+
+
+cdef inline double *_data_or_null(object a):
+    return NULL if a is None else <double *>cnp.PyArray_DATA(<cnp.ndarray>a)
+
+
+cdef inline Py_ssize_t _step(cnp.ndarray a) noexcept:
+    return cnp.PyArray_DIM(a, 1) if cnp.PyArray_NDIM(a) == 2 else 0
+
+
+cdef inline cnp.ndarray _matrix(Py_ssize_t rows, Py_ssize_t cols):
+    cdef cnp.npy_intp dims[2]
+    dims[0] = rows
+    dims[1] = cols
+    return cnp.PyArray_EMPTY(2, dims, cnp.NPY_DOUBLE, 0)
+
+
+cdef inline cnp.ndarray _matrices(Py_ssize_t rows, Py_ssize_t r, Py_ssize_t c):
+    """A fresh (r, c) array, or (rows, r, c) when rows >= 0."""
+    cdef cnp.npy_intp dims[3]
+    if rows < 0:
+        dims[0] = r
+        dims[1] = c
+        return cnp.PyArray_EMPTY(2, dims, cnp.NPY_DOUBLE, 0)
+    dims[0], dims[1], dims[2] = rows, r, c
+    return cnp.PyArray_EMPTY(3, dims, cnp.NPY_DOUBLE, 0)
+
+
+def _raise_not_positive_definite(str ident, int err_nonfinite, row, status=1):
+    where = "" if row < 0 else f" (stacked input, row {row})"
+    if status == err_nonfinite:
+        raise NonFiniteStateError(
+            f"the mass matrix of model '{ident}' is NaN or inf at this state{where}: "
+            "q holds NaN or inf")
+    raise SingularMassMatrixError(
+        f"the mass matrix of model '{ident}' is singular or not positive definite at this "
+        f"state{where}; check the state for NaN or inf and the parameters for zero or "
+        "negative masses and inertias")
+
+
+cdef class _Evaluator:
+    """What every class of kernels holds: the model's identifier, its default parameters
+    (in its module), and parameter_vector, which turns the p= forms other than a float64
+    array into one (None, a dict of overrides, a list)."""
+
+    cdef const double *_defaults
+    cdef int np_, err_nonfinite
+    cdef readonly str ident
+    cdef readonly object parameter_vector
+    cdef object _capsule  # keeps the module's table (and the module) alive
+
+    cdef void _adopt(self, object capsule, const char *ident, int np_, int err_nonfinite,
+                     const double *defaults):
+        self._capsule = capsule
+        self.ident = ident.decode()
+        self.np_ = np_
+        self.err_nonfinite = err_nonfinite
+        self._defaults = defaults
+
+    cdef cnp.ndarray _parameters(self, object p):
+        if type(p) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>p) == cnp.NPY_DOUBLE \
+                and cnp.PyArray_IS_C_CONTIGUOUS(<cnp.ndarray>p) \
+                and cnp.PyArray_NDIM(<cnp.ndarray>p) == 1 \
+                and cnp.PyArray_DIM(<cnp.ndarray>p, 0) == self.np_ \
+                and _all_finite(<const double *>cnp.PyArray_DATA(<cnp.ndarray>p), self.np_):
+            return <cnp.ndarray>p
+        return _converted(self.parameter_vector(p), "p")
+
+    cdef const double *_parameter_data(self, object p, list keep) except? NULL:
+        """The parameters' data: the defaults for None, else p's (kept alive in `keep`)."""
+        if p is None:
+            return self._defaults
+        cdef cnp.ndarray pa = self._parameters(p)
+        keep.append(pa)
+        return <const double *>cnp.PyArray_DATA(pa)
+
+    cdef _failed(self, Py_ssize_t row, int status):
+        _raise_not_positive_definite(self.ident, self.err_nonfinite, row, status)
+
+
+# --- the model's kernels ------------------------------------------------------------------
+
+ctypedef int (*kernel3)(const gagen_model_api *, const double *, const double *,
+                        const double *, const double *, double *) noexcept nogil
+
+
+cdef int _forcing(const gagen_model_api *api, const double *a, const double *b,
+                  const double *c, const double *p, double *out) noexcept nogil:
+    api.forcing(a, b, c, p, out)
+    return 0
+
+
+cdef int _inverse(const gagen_model_api *api, const double *a, const double *b,
+                  const double *c, const double *p, double *out) noexcept nogil:
+    api.inverse_dynamics(a, b, c, p, out)
+    return 0
+
+
+cdef int _forward(const gagen_model_api *api, const double *a, const double *b,
+                  const double *c, const double *p, double *out) noexcept nogil:
+    return api.forward_dynamics(a, b, c, p, out)
+
+
+cdef int _energy(const gagen_model_api *api, const double *a, const double *b,
+                 const double *c, const double *p, double *out) noexcept nogil:
+    api.energy(a, b, p, out)
+    return 0
+
+
+cdef int _gravity(const gagen_model_api *api, const double *a, const double *b,
+                  const double *c, const double *p, double *out) noexcept nogil:
+    api.gravity(a, p, out)
+    return 0
+
+
+cdef int _mass(const gagen_model_api *api, const double *a, const double *b,
+               const double *c, const double *p, double *out) noexcept nogil:
+    api.mass_matrix(a, p, out)
+    return 0
+
+
+cdef int _placements(const gagen_model_api *api, const double *a, const double *b,
+                     const double *c, const double *p, double *out) noexcept nogil:
+    api.placements(a, p, out)
+    return 0
+
+
+cdef int _regressor(const gagen_model_api *api, const double *a, const double *b,
+                    const double *c, const double *p, double *out) noexcept nogil:
+    api.regressor(a, b, c, p, out)
+    return 0
+
+
+cdef class CompiledModel(_Evaluator):
+    """The compiled kernels of a model's module, from its capsule `API`;
+    `parameter_vector` turns the p= forms other than a float64 array into one,
+    `external_forces(q, fext, p)` gives the joint forces of wrenches on frames."""
+
+    cdef const gagen_model_api *api
+    cdef readonly object external_forces
+
+    def __init__(self, capsule, parameter_vector, external_forces=None):
+        self.api = <const gagen_model_api *>_table(capsule, MODEL_CAPSULE)
+        self._adopt(capsule, self.api.ident, self.api.np, self.api.err_nonfinite,
+                    self.api.parameter_defaults)
+        self.parameter_vector = parameter_vector
+        self.external_forces = external_forces
+
+    cdef object _run(self, kernel3 kernel, Py_ssize_t nout, object x, object y, object z,
+                     object p, str nx, str ny, str nz):
+        """Evaluate a kernel at one state or at stacked states (one C loop, GIL released)."""
+        cdef const gagen_model_api *api = self.api
+        cdef cnp.ndarray a = _state(x, nx, api.nq)
+        cdef cnp.ndarray b = _state(y, ny, api.nv) if ny is not None else a
+        cdef cnp.ndarray c = _state(z, nz, api.nv) if nz is not None else a
+        cdef list keep = []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(a, -1, nx)
+        if ny is not None:
+            rows = _rows(b, rows, ny)
+        if nz is not None:
+            rows = _rows(c, rows, nz)
+        cdef cnp.npy_intp dims[2]
+        cdef cnp.ndarray out
+        cdef int status = 0
+        if rows < 0:
+            dims[0] = nout
+            out = cnp.PyArray_EMPTY(1, dims, cnp.NPY_DOUBLE, 0)
+            status = kernel(api, _data(a), _data(b), _data(c), pp, _data(out))
+            if status:
+                self._failed(-1, status)
+            return out
+        dims[0] = rows
+        dims[1] = nout
+        out = cnp.PyArray_EMPTY(2, dims, cnp.NPY_DOUBLE, 0)
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *pc = _data(c)
+        cdef double *po = _data(out)
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), sc = _step(c), i
+        cdef Py_ssize_t failed = -1
+        cdef int code
+        with nogil:
+            for i in range(rows):
+                code = kernel(api, pa_ + i * sa, pb + i * sb, pc + i * sc, pp, po + i * nout)
+                if code != 0 and failed < 0:
+                    failed = i
+                    status = code
+        if failed >= 0:
+            self._failed(failed, status)
+        return out
+
+    def mass_matrix(self, q, p=None):
+        """M(q), shape (n, n), or (N, n, n) for stacked q."""
+        cdef int nv = self.api.nv
+        out = self._run(_mass, nv * nv, q, None, None, p, "q", None, None)
+        if cnp.PyArray_NDIM(<cnp.ndarray>out) == 1:
+            return out.reshape(nv, nv)
+        return out.reshape(-1, nv, nv)
+
+    def forcing(self, q, qd, tau, p=None):
+        """F(q, qd, tau) such that M(q) qdd = F."""
+        return self._run(_forcing, self.api.nv, q, qd, tau, p, "q", "qd", "tau")
+
+    def forward_dynamics(self, q, qd, tau, p=None, fext=None):
+        """qdd = M(q)^-1 F(q, qd, tau [+ J^T w of the wrenches fext])."""
+        if fext is not None:
+            tau = as_float_array(tau, "tau") + self.external_forces(q, fext, p)
+        return self._run(_forward, self.api.nv, q, qd, tau, p, "q", "qd", "tau")
+
+    def inverse_dynamics(self, q, qd, qdd, p=None, fext=None):
+        """The joint torques (forces for prismatic joints) that give qdd [under fext]."""
+        tau = self._run(_inverse, self.api.nv, q, qd, qdd, p, "q", "qd", "qdd")
+        if fext is not None:
+            tau = tau - self.external_forces(q, fext, p)
+        return tau
+
+    def placements(self, q, p=None):
+        """Per body, its orientation (row-major), origin and joint axis in the world."""
+        return self._run(_placements, 15 * self.api.nb, q, None, None, p, "q", None, None)
+
+    def frame_offsets(self, p=None):
+        """Per frame, its axes (row-major) and origin in its body's frame."""
+        cdef list keep = []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef cnp.npy_intp dims[1]
+        dims[0] = 12 * self.api.nf
+        cdef cnp.ndarray out = cnp.PyArray_EMPTY(1, dims, cnp.NPY_DOUBLE, 0)
+        self.api.frame_offsets(pp, _data(out))
+        return out
+
+    def frame(self, int which, int frame, q, qd, p=None):
+        """A frame's placement (which 0: R and origin, 12 values), Jacobian (1: 6 x NV) or
+        velocity (2: 6 values) at one state or stacked states."""
+        cdef const gagen_model_api *api = self.api
+        if not 0 <= frame < api.nf:
+            raise IndexError(f"frame {frame} out of range (0 .. {api.nf - 1})")
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef cnp.ndarray b = _state(qd, "qd", api.nv) if which == 2 else a
+        cdef list keep = []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(a, -1, "q")
+        if which == 2:
+            rows = _rows(b, rows, "qd")
+        cdef int nout = 12 if which == 0 else (6 * api.nv if which == 1 else 6)
+        cdef cnp.npy_intp dims[2]
+        dims[0] = rows if rows >= 0 else 1
+        dims[1] = nout
+        cdef cnp.ndarray out = cnp.PyArray_EMPTY(2, dims, cnp.NPY_DOUBLE, 0)
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *po = _data(out)
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), i, count = dims[0]
+        with nogil:
+            for i in range(count):
+                if which == 0:
+                    api.frame_placement(pa_ + i * sa, pp, frame, po + i * nout,
+                                        po + i * nout + 9)
+                elif which == 1:
+                    api.frame_jacobian(pa_ + i * sa, pp, frame, po + i * nout)
+                else:
+                    api.frame_velocity(pa_ + i * sa, pb + i * sb, pp, frame, po + i * nout)
+        return out if rows >= 0 else out[0]
+
+    def gravity(self, q, p=None):
+        """The gravity torques g(q) = inverse_dynamics(q, 0, 0)."""
+        return self._run(_gravity, self.api.nv, q, None, None, p, "q", None, None)
+
+    def energy(self, q, qd, p=None):
+        """(kinetic, potential): floats, or arrays of shape (N,) for stacked states."""
+        out = self._run(_energy, 2, q, qd, None, p, "q", "qd", None)
+        if cnp.PyArray_NDIM(<cnp.ndarray>out) == 1:
+            return float(out[0]), float(out[1])
+        return out[:, 0].copy(), out[:, 1].copy()
+
+    def regressor(self, q, qd, qdd, p=None):
+        """Y(q, qd, qdd), shape (n, P), or (N, n, P) for stacked states."""
+        cdef int nv = self.api.nv, nreg = self.api.nreg
+        out = self._run(_regressor, nv * nreg, q, qd, qdd, p, "q", "qd", "qdd")
+        if cnp.PyArray_NDIM(<cnp.ndarray>out) == 1:
+            return out.reshape(nv, nreg)
+        return out.reshape(-1, nv, nreg)
+
+    def regressor_parameters(self, p=None):
+        """pi, shape (P,): the dynamic parameters at p."""
+        cdef list keep = []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef cnp.npy_intp dims[1]
+        dims[0] = self.api.nreg
+        cdef cnp.ndarray out = cnp.PyArray_EMPTY(1, dims, cnp.NPY_DOUBLE, 0)
+        self.api.regressor_parameters(pp, _data(out))
+        return out
+
+
+# --- simulations: the model's C integrators and controllers --------------------------------
+
+def _vector(x, Py_ssize_t size, str name):
+    if x is None:
+        return np.zeros(size)
+    if type(x) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>x) == cnp.NPY_DOUBLE \
+            and cnp.PyArray_IS_C_CONTIGUOUS(<cnp.ndarray>x) and cnp.PyArray_NDIM(<cnp.ndarray>x) == 1 \
+            and cnp.PyArray_DIM(<cnp.ndarray>x, 0) == size:
+        return x
+    arr = np.ascontiguousarray(x, dtype=np.float64).ravel()
+    if arr.size == 1 and size > 1:
+        arr = np.full(size, arr[0])
+    if arr.size != size:
+        raise ValueError(f"{name} must have {size} entries, got {arr.size}")
+    return arr
+
+
+cdef inline void _split_states(const double *y, Py_ssize_t m, Py_ssize_t nq, Py_ssize_t nv,
+                               double *q, double *qd) noexcept nogil:
+    """Rows of y = [q, qd] (m x (nq + nv)) into q (m x nq) and qd (m x nv)."""
+    cdef Py_ssize_t r, k, ny = nq + nv
+    for r in range(m):
+        for k in range(nq):
+            q[r * nq + k] = y[r * ny + k]
+        for k in range(nv):
+            qd[r * nv + k] = y[r * ny + nq + k]
+
+
+def _frame_wrenches(frames, wrenches, int nf):
+    """Frame numbers (int32) and their wrenches ((count, 6) float64), checked."""
+    fr = np.ascontiguousarray(np.zeros(0) if frames is None else frames, dtype=np.int32).ravel()
+    wr = np.ascontiguousarray(np.zeros((0, 6)) if wrenches is None else wrenches,
+                              dtype=np.float64).reshape(-1, 6)
+    if wr.shape[0] != fr.size or np.any(fr < 0) or np.any(fr >= nf) \
+            or not np.all(np.isfinite(wr)):
+        raise ValueError(f"frames must be frame numbers in 0 .. {nf - 1}, one finite wrench "
+                         "(6 values) each")
+    return fr, wr
+
+
+cdef int _method_code(str method) except -1:
+    if method == "dopri5":
+        return GAGEN_METHOD_DOPRI5
+    if method == "rk4":
+        return GAGEN_METHOD_RK4
+    raise ValueError(f"unknown compiled method '{method}' (dopri5 or rk4)")
+
+
+cdef class CompiledSimulation:
+    """The robot, its controller and gagen's C integrators, run without Python per step."""
+
+    cdef const gagen_model_api *api
+    cdef gagen_control ctl
+    cdef const double *p
+    cdef object _keep
+
+    def __init__(self, CompiledModel model, p, int kind, kp=None, kd=None, target=None,
+                 bint gravity_compensation=False, traj_q0=None, traj_qf=None,
+                 double traj_Tp=1.0, feedforward=None, frames=None, wrenches=None):
+        self.api = model.api
+        cdef int nq = self.api.nq, nv = self.api.nv
+        params = model._parameters(model.parameter_vector(None) if p is None else p)
+        arrays = [params] + [None if v is None else _vector(v, size, name) for v, name, size in
+                             ((kp, "kp", nv), (kd, "kd", nv), (target, "target", nv),
+                              (traj_q0, "trajectory q0", nq), (traj_qf, "trajectory qf", nq),
+                              (feedforward, "feedforward", nv))]
+        fr, wr = _frame_wrenches(frames, wrenches, self.api.nf)
+        # the C structure points into them (NULL: zeros); the model keeps its table alive
+        self._keep = arrays + [fr, wr, model]
+        self.ctl.feedforward = _data_or_null(arrays[6])
+        self.ctl.nframes = cnp.PyArray_SIZE(fr)
+        self.ctl.frames = <const int *>cnp.PyArray_DATA(fr)
+        self.ctl.wrenches = _data(wr)
+        self.p = _data(arrays[0])
+        self.ctl.kind = kind
+        self.ctl.kp = _data_or_null(arrays[1])
+        self.ctl.kd = _data_or_null(arrays[2])
+        self.ctl.target = _data_or_null(arrays[3])
+        self.ctl.gravity_compensation = gravity_compensation
+        self.ctl.traj_q0 = _data_or_null(arrays[4])
+        self.ctl.traj_qf = _data_or_null(arrays[5])
+        self.ctl.traj_Tp = traj_Tp
+        self.ctl.poll = _poll_signals
+        self.ctl.poll_ctx = NULL
+
+    def run(self, str method, double t0, double t1, q0, qd0, t_eval, double rtol=1e-6,
+            atol=1e-8, double first_step=0.0, double max_step=0.0, long max_steps=0,
+            double h=1e-3):
+        """Integrate from (q0, qd0) and add the controller's torques at the samples.
+
+        Returns (q, qd, tau: fresh (m, n) arrays, status, stats dict); on a failed
+        integration the rows not reached are NaN and so is all of tau."""
+        cdef const gagen_model_api *api = self.api
+        cdef int code = _method_code(method)
+        cdef int nq = api.nq, nv = api.nv, ny = nq + nv
+        cdef cnp.ndarray y0 = np.concatenate([_vector(q0, nq, "q0"), _vector(qd0, nv, "qd0")])
+        cdef cnp.ndarray at = np.full(ny, <double>atol) if type(atol) is float \
+            else np.array(_vector(atol, ny, "atol"))
+        cdef cnp.ndarray te = np.ascontiguousarray(t_eval, dtype=np.float64)
+        cdef int m = cnp.PyArray_SIZE(te)
+        cdef cnp.ndarray y = _matrix(m, ny)
+        cdef cnp.ndarray q = _matrix(m, nq), qd = _matrix(m, nv), tau = _matrix(m, nv)
+        cdef double *pt = _data(te)
+        cdef double *py = _data(y)
+        cdef double *pq = _data(q)
+        cdef double *pqd = _data(qd)
+        cdef double *ptau = _data(tau)
+        cdef double *py0 = _data(y0)
+        cdef double *pat = _data(at)
+        cdef gagen_ode_stats stats
+        cdef int status
+        cdef Py_ssize_t i
+        raised = []  # what a signal handler raised while the integrator ran (Ctrl-C)
+        self.ctl.poll_ctx = <void *>raised
+        with nogil:
+            status = api.simulate(code, &self.ctl, self.p, t0, t1, py0, rtol, pat,
+                                  first_step, max_step, max_steps, h, pt, m, py, &stats)
+            _split_states(py, m, nq, nv, pq, pqd)
+            if status == 0:  # the controller passed the integrator's checks: no new status
+                api.control_torques(&self.ctl, self.p, m, pt, py, ptau)
+            else:
+                for i in range(m * nv):
+                    ptau[i] = NAN
+        self.ctl.poll_ctx = NULL
+        if raised:
+            raise raised[0]
+        info = {"nfev": stats.nfev, "nsteps": stats.nsteps, "naccepted": stats.naccepted,
+                "nrejected": stats.nrejected}
+        return q, qd, tau, status, info
+
+    def torques(self, t, y):
+        """The controller's torques at times t (m,) and states y (m, 2n): (tau, status)."""
+        cdef const gagen_model_api *api = self.api
+        cdef int ny = api.nq + api.nv
+        cdef cnp.ndarray tt = np.ascontiguousarray(t, dtype=np.float64)
+        cdef cnp.ndarray yy = np.ascontiguousarray(y, dtype=np.float64)
+        cdef Py_ssize_t m = tt.size
+        if yy.ndim != 2 or yy.shape[0] != m or yy.shape[1] != ny:
+            raise ValueError(f"y must have shape ({m}, {ny})")
+        cdef cnp.ndarray res = _matrix(m, api.nv)
+        cdef int status
+        cdef double *pt = _data(tt)
+        cdef double *py = _data(yy)
+        cdef double *pr = _data(res)
+        with nogil:
+            status = api.control_torques(&self.ctl, self.p, m, pt, py, pr)
+        return res, status
+
+
+cdef cnp.ndarray _runs_table(object a, Py_ssize_t runs, Py_ssize_t cols, int typenum,
+                             str name):
+    """a, a C-contiguous array of the given type and shape (runs, cols) or (1, cols)."""
+    if not (type(a) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>a) == typenum
+            and cnp.PyArray_IS_C_CONTIGUOUS(<cnp.ndarray>a) and cnp.PyArray_NDIM(<cnp.ndarray>a) == 2
+            and cnp.PyArray_DIM(<cnp.ndarray>a, 1) == cols
+            and (cnp.PyArray_DIM(<cnp.ndarray>a, 0) == runs or cnp.PyArray_DIM(<cnp.ndarray>a, 0) == 1)):
+        raise ValueError(f"{name} must be a C-contiguous array of shape ({runs}, {cols}) or "
+                         f"(1, {cols}) and type number {typenum}")
+    return <cnp.ndarray>a
+
+
+cdef double *_output(object a, Py_ssize_t runs, Py_ssize_t m, Py_ssize_t size,
+                     str name) except NULL:
+    """The data of a C-contiguous float64 array of shape (runs, m, size), written in place."""
+    if not (type(a) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>a) == cnp.NPY_DOUBLE
+            and cnp.PyArray_IS_C_CONTIGUOUS(<cnp.ndarray>a) and a.shape == (runs, m, size)):
+        raise ValueError(f"{name} must be a C-contiguous float64 array of shape "
+                         f"({runs}, {m}, {size})")
+    return _data(<cnp.ndarray>a)
+
+
+cdef inline Py_ssize_t _row_step(cnp.ndarray a) noexcept:
+    """Rows of a _runs_table to advance per run: 0 for one row shared by every run."""
+    return 1 if cnp.PyArray_DIM(a, 0) > 1 else 0
+
+
+cdef class CompiledBatch:
+    """Runs of one method over one time grid, each with its own initial state, parameters
+    and controller (a table has one row per run, or one row for all), written into rows of
+    preallocated arrays q (N, m, nq), qd, tau (N, m, nv) and stats (N, 5: status, nfev, nsteps,
+    naccepted, nrejected). Every run is the C call of CompiledSimulation.run, so it gives
+    the same numbers. run(start, stop) integrates a slice without the GIL: threads may run
+    disjoint slices at once; stop() makes them all return at their next poll."""
+
+    cdef const gagen_model_api *api
+    cdef int code, m, nq, nv, np_
+    cdef Py_ssize_t N
+    cdef double t0, t1, rtol, first_step, max_step, h
+    cdef long max_steps
+    cdef const double *at
+    cdef int stop_flag
+    cdef object _keep
+    cdef const double *te
+    cdef const double *y0
+    cdef const double *p
+    cdef const int32_t *kind
+    cdef const int32_t *gc
+    cdef const double *kp
+    cdef const double *kd
+    cdef const double *target
+    cdef const double *tq0
+    cdef const double *tqf
+    cdef const double *ff
+    cdef int nframes
+    cdef const int *frames
+    cdef const double *wrenches
+    cdef const double *tTp
+    cdef Py_ssize_t y_step, p_step, c_step
+    cdef double *q
+    cdef double *qd
+    cdef double *tau
+    cdef int64_t *stats
+
+    def __init__(self, CompiledModel model, str method, double t0, double t1, t_eval,
+                 double rtol, atol, double first_step, double max_step, long max_steps,
+                 double h, y0, p, kind, gravity_compensation, kp, kd, target, traj_q0,
+                 traj_qf, traj_Tp, q, qd, tau, stats, feedforward=None, frames=None,
+                 wrenches=None):
+        self.api = model.api
+        self.code = _method_code(method)
+        cdef int nq = self.api.nq, nv = self.api.nv, ny = nq + nv
+        self.nq, self.nv, self.np_ = nq, nv, self.api.np
+        cdef cnp.ndarray at = np.array(_vector(atol, ny, "atol"))
+        cdef cnp.ndarray te = np.ascontiguousarray(t_eval, dtype=np.float64)
+        self.m = cnp.PyArray_SIZE(te)
+        self.N = np.shape(q)[0]
+        cdef Py_ssize_t N = self.N
+        cdef cnp.ndarray y = _runs_table(y0, N, ny, cnp.NPY_DOUBLE, "y0")
+        cdef cnp.ndarray pp = _runs_table(p, N, self.np_, cnp.NPY_DOUBLE, "p")
+        cdef cnp.ndarray kd_ = _runs_table(kind, N, 1, cnp.NPY_INT32, "kind")
+        cdef cnp.ndarray gc = _runs_table(gravity_compensation, N, 1, cnp.NPY_INT32,
+                                          "gravity_compensation")
+        cdef cnp.ndarray tp = _runs_table(traj_Tp, N, 1, cnp.NPY_DOUBLE, "traj_Tp")
+        if feedforward is None:
+            feedforward = np.zeros((np.shape(kp)[0], nv))
+        cs = [_runs_table(v, N, size, cnp.NPY_DOUBLE, name) for v, name, size in
+              ((kp, "kp", nv), (kd, "kd", nv), (target, "target", nv),
+               (traj_q0, "traj_q0", nq), (traj_qf, "traj_qf", nq),
+               (feedforward, "feedforward", nv))]
+        fr, wr = _frame_wrenches(frames, wrenches, self.api.nf)
+        if len({c.shape[0] for c in cs + [kd_, gc, tp]}) != 1:
+            raise ValueError("the controller tables must all have one row, or one per run")
+        self.q = _output(q, N, self.m, nq, "q")
+        self.qd = _output(qd, N, self.m, nv, "qd")
+        self.tau = _output(tau, N, self.m, nv, "tau")
+        cdef cnp.ndarray st = _runs_table(stats, N, 5, cnp.NPY_INT64, "stats")
+        if st.shape[0] != N:
+            raise ValueError(f"stats must have shape ({N}, 5)")
+        # pointed into; the model keeps its table alive
+        self._keep = [te, y, pp, kd_, gc, tp, cs, q, qd, tau, st, fr, wr, at, model]
+        self.t0, self.t1, self.rtol, self.h = t0, t1, rtol, h
+        self.first_step, self.max_step, self.max_steps = first_step, max_step, max_steps
+        self.at = _data(at)
+        self.te = _data(te)
+        self.y0, self.y_step = _data(y), _row_step(y)
+        self.p, self.p_step = _data(pp), _row_step(pp)
+        self.kind = <const int32_t *>cnp.PyArray_DATA(kd_)
+        self.gc = <const int32_t *>cnp.PyArray_DATA(gc)
+        self.kp = _data(<cnp.ndarray>cs[0])
+        self.kd = _data(<cnp.ndarray>cs[1])
+        self.target = _data(<cnp.ndarray>cs[2])
+        self.tq0 = _data(<cnp.ndarray>cs[3])
+        self.tqf = _data(<cnp.ndarray>cs[4])
+        self.ff = _data(<cnp.ndarray>cs[5])
+        self.nframes = cnp.PyArray_SIZE(fr)
+        self.frames = <const int *>cnp.PyArray_DATA(fr)
+        self.wrenches = _data(wr)
+        self.tTp = _data(tp)
+        self.c_step = _row_step(tp)
+        self.stats = <int64_t *>cnp.PyArray_DATA(st)
+        self.stop_flag = 0
+
+    def run(self, Py_ssize_t start, Py_ssize_t stop):
+        """Integrate runs start .. stop-1 without the GIL; False if stop() ended it early."""
+        if not 0 <= start <= stop <= self.N:
+            raise ValueError(f"runs {start}:{stop} are not within 0:{self.N}")
+        cdef double *y = <double *>malloc((self.m + 1) * (self.nq + self.nv) * sizeof(double))
+        if y == NULL:
+            raise MemoryError()
+        cdef Py_ssize_t i
+        with nogil:
+            for i in range(start, stop):
+                if self.stop_flag:
+                    break
+                self._one(i, y)
+        free(y)
+        return not self.stop_flag
+
+    def stop(self):
+        """Make every run() in progress return at its next poll (every 256 steps)."""
+        self.stop_flag = 1
+
+    cdef void _one(self, Py_ssize_t i, double *y) noexcept nogil:
+        cdef gagen_control ctl
+        cdef gagen_ode_stats st
+        cdef Py_ssize_t c = i * self.c_step, k, m = self.m
+        cdef int nq = self.nq, nv = self.nv
+        cdef const double *p = self.p + i * self.p_step * self.np_
+        cdef double *q = self.q + i * m * nq
+        cdef double *qd = self.qd + i * m * nv
+        cdef double *tau = self.tau + i * m * nv
+        ctl.kind = self.kind[c]
+        ctl.gravity_compensation = self.gc[c]
+        ctl.kp = self.kp + c * nv
+        ctl.kd = self.kd + c * nv
+        ctl.target = self.target + c * nv
+        ctl.traj_q0 = self.tq0 + c * nq
+        ctl.traj_qf = self.tqf + c * nq
+        ctl.traj_Tp = self.tTp[c]
+        ctl.feedforward = self.ff + c * nv
+        ctl.nframes = self.nframes
+        ctl.frames = self.frames
+        ctl.wrenches = self.wrenches
+        ctl.poll = _poll_flag
+        ctl.poll_ctx = <void *>&self.stop_flag
+        st.nfev = st.nsteps = st.naccepted = st.nrejected = 0
+        cdef int status = self.api.simulate(self.code, &ctl, p, self.t0, self.t1,
+                                            self.y0 + i * self.y_step * (nq + nv), self.rtol,
+                                            self.at, self.first_step, self.max_step,
+                                            self.max_steps, self.h, self.te, m, y, &st)
+        _split_states(y, m, nq, nv, q, qd)
+        if status == 0:
+            self.api.control_torques(&ctl, p, m, self.te, y, tau)
+        else:
+            for k in range(m * nv):
+                tau[k] = NAN
+        cdef int64_t *s = self.stats + i * 5
+        s[0] = status
+        s[1] = st.nfev
+        s[2] = st.nsteps
+        s[3] = st.naccepted
+        s[4] = st.nrejected
+
+
+cdef int _poll_flag(void *ctx) noexcept nogil:
+    """A batch's poll: stop once the flag at ctx is set. The batch's threads cannot run
+    Python's signal handlers (only the main thread does), so the main thread catches Ctrl-C
+    and sets the flag (CompiledBatch.stop)."""
+    return (<int *>ctx)[0]
+
+
+cdef int _poll_signals(void *ctx) noexcept nogil:
+    """Run Python's signal handlers (briefly taking the GIL); keep what they raise in the
+    list ctx and tell the integrator to stop."""
+    with gil:
+        try:
+            PyErr_CheckSignals()
+        except BaseException as exc:
+            (<list>ctx).append(exc)
+            return 1
+    return 0
+
+
+# --- the derivative module's kernels -------------------------------------------------------
+
+# a kernel of (up to) three input arrays and three output matrices
+ctypedef int (*matrices3)(const gagen_derivatives_api *, const double *, const double *,
+                          const double *, const double *, double *, double *,
+                          double *) noexcept nogil
+
+
+cdef int _inverse_derivatives(const gagen_derivatives_api *api, const double *a,
+                              const double *b, const double *c, const double *p, double *o0,
+                              double *o1, double *o2) noexcept nogil:
+    api.inverse_dynamics_derivatives(a, b, c, p, o0, o1)
+    return 0
+
+
+cdef int _forward_derivatives(const gagen_derivatives_api *api, const double *a,
+                              const double *b, const double *c, const double *p, double *o0,
+                              double *o1, double *o2) noexcept nogil:
+    return api.forward_dynamics_derivatives(a, b, c, p, o0, o1, o2)
+
+
+cdef int _coriolis(const gagen_derivatives_api *api, const double *a, const double *b,
+                   const double *c, const double *p, double *o0, double *o1,
+                   double *o2) noexcept nogil:
+    api.coriolis_matrix(a, b, p, o0)
+    return 0
+
+
+cdef int _linearize(const gagen_derivatives_api *api, const double *a, const double *b,
+                    const double *c, const double *p, double *o0, double *o1,
+                    double *o2) noexcept nogil:
+    return api.linearize(a, b, c, p, o0, o1)
+
+
+cdef class CompiledDerivatives(_Evaluator):
+    """The compiled derivative kernels of a model's derivative module, from its capsule
+    `API`. gagen.runtime.compiled.CompiledDynamics binds these methods (their documentation
+    is gagen.runtime.dynamics.Dynamics's)."""
+
+    cdef const gagen_derivatives_api *api
+
+    def __init__(self, capsule, parameter_vector):
+        self.api = <const gagen_derivatives_api *>_table(capsule, DERIVATIVES_CAPSULE)
+        self._adopt(capsule, self.api.ident, self.api.np, self.api.err_nonfinite,
+                    self.api.parameter_defaults)
+        self.parameter_vector = parameter_vector
+
+    cdef tuple _run(self, matrices3 kernel, int count, Py_ssize_t r0, Py_ssize_t c0,
+                    Py_ssize_t r1, Py_ssize_t c1, object x, object y, object z, object p,
+                    str nx, str ny, str nz):
+        """`count` fresh matrices, the first (r0, c0) and the others (r1, c1), from a kernel
+        at one state or at stacked states (one C loop, GIL released)."""
+        cdef const gagen_derivatives_api *api = self.api
+        cdef cnp.ndarray a = _state(x, nx, api.nq)
+        cdef cnp.ndarray b = _state(y, ny, api.nv) if ny is not None else a
+        cdef cnp.ndarray c = _state(z, nz, api.nv) if nz is not None else a
+        cdef list keep = []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(a, -1, nx)
+        if ny is not None:
+            rows = _rows(b, rows, ny)
+        if nz is not None:
+            rows = _rows(c, rows, nz)
+        cdef cnp.ndarray m0 = _matrices(rows, r0, c0)
+        cdef cnp.ndarray m1 = _matrices(rows, r1, c1) if count > 1 else m0
+        cdef cnp.ndarray m2 = _matrices(rows, r1, c1) if count > 2 else m0
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *pc = _data(c)
+        cdef double *p0 = _data(m0)
+        cdef double *p1 = _data(m1)
+        cdef double *p2 = _data(m2)
+        # the kernels leave the outputs beyond `count` alone: those point at m0, standing still
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), sc = _step(c), s0 = r0 * c0
+        cdef Py_ssize_t s1 = r1 * c1 if count > 1 else 0
+        cdef Py_ssize_t s2 = r1 * c1 if count > 2 else 0
+        cdef Py_ssize_t i, failed = -1
+        cdef int code, status = 0
+        if rows < 0:
+            status = kernel(api, pa_, pb, pc, pp, p0, p1, p2)
+        else:
+            with nogil:
+                for i in range(rows):
+                    code = kernel(api, pa_ + i * sa, pb + i * sb, pc + i * sc, pp,
+                                  p0 + i * s0, p1 + i * s1, p2 + i * s2)
+                    if code != 0 and failed < 0:
+                        failed = i
+                        status = code
+        if status:
+            self._failed(failed, status)
+        if count == 1:
+            return (m0,)
+        if count == 2:
+            return (m0, m1)
+        return (m0, m1, m2)
+
+    def inverse_dynamics_derivatives(self, q, qd, qdd, p=None):
+        """(dtau_dq, dtau_dqd) of tau = inverse_dynamics(q, qd, qdd)."""
+        cdef Py_ssize_t nv = self.api.nv
+        return self._run(_inverse_derivatives, 2, nv, nv, nv, nv, q, qd, qdd, p,
+                         "q", "qd", "qdd")
+
+    def forward_dynamics_derivatives(self, q, qd, tau, p=None):
+        """(dqdd_dq, dqdd_dqd, dqdd_dtau = M^-1) of qdd = forward_dynamics(q, qd, tau)."""
+        cdef Py_ssize_t nv = self.api.nv
+        return self._run(_forward_derivatives, 3, nv, nv, nv, nv, q, qd, tau, p,
+                         "q", "qd", "tau")
+
+    def coriolis_matrix(self, q, qd, p=None):
+        """C(q, qd): C qd = the velocity terms, Mdot - 2C skew-symmetric."""
+        cdef Py_ssize_t nv = self.api.nv
+        return self._run(_coriolis, 1, nv, nv, nv, nv, q, qd, None, p, "q", "qd", None)[0]
+
+    def linearize(self, q, qd, tau, p=None):
+        """(A, B) of x' = f(x, tau) at x = (q, qd)."""
+        cdef Py_ssize_t nv = self.api.nv
+        return self._run(_linearize, 2, 2 * nv, 2 * nv, 2 * nv, nv, q, qd, tau, p,
+                         "q", "qd", "tau")
