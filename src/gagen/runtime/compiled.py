@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from ..errors import BuildError
 from ..manifest import ModelInfo
-from . import _native
 from .dynamics import Dynamics
 from .frames import frame_index
 
@@ -14,6 +13,14 @@ KERNEL_METHODS = ("mass_matrix", "forcing", "forward_dynamics", "inverse_dynamic
 # the methods of a model's derivative module (codegen/derivatives.py), bound on first use
 DERIVATIVE_METHODS = ("inverse_dynamics_derivatives", "forward_dynamics_derivatives",
                       "coriolis_matrix", "linearize")
+
+
+def native():
+    """gagen's compiled runtime, imported on first use: without it (a source tree that was
+    never built), `import gagen` and the lambdify backend still work."""
+    from . import _native
+
+    return _native
 
 
 class CompiledDynamics(Dynamics):
@@ -35,8 +42,8 @@ class CompiledDynamics(Dynamics):
         self._model_ref = model_ref
         self._derivatives = derivatives
         self.derivative_module = None
-        self.kernels = _native.CompiledModel(module.API, self.parameter_vector,
-                                             self.external_forces)
+        self.kernels = native().CompiledModel(module.API, self.parameter_vector,
+                                              self.external_forces)
         for name in KERNEL_METHODS:
             setattr(self, name, getattr(self.kernels, name))
 
@@ -78,7 +85,7 @@ class CompiledDynamics(Dynamics):
                 f"the derivative module {module.__name__} was not built from the equations of "
                 f"{self.module.__name__} (its key {module.EQUATIONS_KEY[:12]}, expected "
                 f"{self.module.KEY[:12]})")
-        kernels = _native.CompiledDerivatives(module.API, self.parameter_vector)
+        kernels = native().CompiledDerivatives(module.API, self.parameter_vector)
         for name in DERIVATIVE_METHODS:
             setattr(self, name, getattr(kernels, name))
         self.derivative_module = module

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..runtime import _native
+from ..runtime.compiled import native
 from ..runtime.inputs import as_float_array
 from .simulate import (
     COMPILED_METHODS,
@@ -235,7 +235,7 @@ def run_plan(dyn, plan: BatchPlan, threads: int = 1, progress: Progress | None =
     qd, tau = (np.empty((runs, m, n)) for _ in range(2))
     stats = np.zeros((runs, 5), np.int64)
     c = plan.control
-    batch = _native.CompiledBatch(
+    batch = native().CompiledBatch(
         dyn.kernels, s.method, s.t0, s.t1, s.t_eval, s.rtol, s.atol, s.first_step, s.max_step,
         s.max_steps, s.h, plan.y0, plan.p, c["kind"], c["gravity_compensation"], c["kp"],
         c["kd"], c["target"], c["traj_q0"], c["traj_qf"], c["traj_Tp"], q, qd, tau, stats)

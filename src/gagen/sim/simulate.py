@@ -29,7 +29,7 @@ import numpy as np
 
 from ..errors import NonFiniteStateError, SingularMassMatrixError
 from ..manifest import FRICTION_WIDTH
-from ..runtime import _native
+from ..runtime.compiled import native
 from .controllers import Controller
 
 COMPILED_METHODS = ("dopri5", "rk4")
@@ -514,7 +514,7 @@ def _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_e
     if wrenches is not None:
         spec = {**spec, "frames": wrenches[0], "wrenches": wrenches[1]}
     start = time.perf_counter()
-    sim = _native.CompiledSimulation(dyn.kernels, pvec, **spec)
+    sim = native().CompiledSimulation(dyn.kernels, pvec, **spec)
     q, qd, tau, status, info = settings.run(sim, q0, qd0)
     q = unit_quaternions(dyn, q)
     te = settings.t_eval
