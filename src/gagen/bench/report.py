@@ -271,7 +271,9 @@ def markdown(results: dict, images: dict | None = None) -> str:
         "algorithms in a C++ loop compiled with -O3 -march=native, where available, "
         "timed twice: each result left in Pinocchio's `data` for the next call to "
         "overwrite, and every state's result stored (M in full) in a fresh array of the "
-        "batch, the output gagen's batched call returns. "
+        "batch, the output gagen's batched call returns. The batched loop and the C++ "
+        "loop alternate, round after round (medians of 9 rounds, the C++ side's median "
+        "of 3 passes in each), so both meet the machine in the same states. "
         "(×): Pinocchio's time as a multiple of gagen's (> 1: gagen is faster).",
         scaling_table, None, images)
     notes = results.get("notes") or []

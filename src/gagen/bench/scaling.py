@@ -149,6 +149,35 @@ def time_model(row: dict, dyn, peer, repeats: int, target: float) -> None:
         row[cand.name] = timing.median * 1e6 / per
 
 
+CPP_ROUNDS = 9  # alternations of gagen's batched loop and the C++ harness
+CPP_PASSES = 3  # passes of the harness per round (it reports their median)
+CPP_KEYS = {"fd": "aba", "id": "rnea", "M": "crba"}
+
+
+def time_batched_against_cpp(row: dict, dyn, harness, peer, folder: Path,
+                             rounds: int = CPP_ROUNDS) -> None:
+    """Per state, gagen's batched loop and Pinocchio's C++ loop (gagen.bench.pinocchio_cpp)
+    timed in alternation, round after round, so that both meet the machine in the same
+    states; the medians over the rounds go into `row` (`<key>_state_us`, `cpp_<key>_us`,
+    `cpp_stored_<key>_us`), replacing time_model's batched figures."""
+    from .pinocchio_cpp import cpp_times
+
+    q, qd, tau = (np.tile(x, (BATCH, 1)) for x in fixed_state(dyn.n))
+    samples: dict[str, list[float]] = {}
+    for _ in range(rounds):
+        for key, method, _ in KERNELS:
+            args = (q,) if key == "M" else (q, qd, tau)
+            start = time.perf_counter()
+            getattr(dyn, method)(*args)
+            samples.setdefault(f"{key}_state_us", []).append(
+                (time.perf_counter() - start) * 1e6 / BATCH)
+        times = cpp_times(harness, peer, folder, states=BATCH, repeats=CPP_PASSES)
+        for key, algorithm in CPP_KEYS.items():
+            samples.setdefault(f"cpp_{key}_us", []).append(times[algorithm])
+            samples.setdefault(f"cpp_stored_{key}_us", []).append(times[f"{algorithm}_stored"])
+    row.update({name: statistics.median(values) for name, values in samples.items()})
+
+
 def _peer_configuration(pin, peer, n: int) -> np.ndarray:
     """A configuration of Pinocchio's model of the robot (its nq can exceed n: continuous
     joints as cos/sin pairs)."""
@@ -188,13 +217,7 @@ def scaling_rows(models, cache_dir, repeats: int = REPEATS, target: float = DEFA
         peer = pinocchio_peer(name, dyn.model)
         time_model(row, dyn, peer, repeats, target)
         if harness is not None and peer is not None:
-            from .pinocchio_cpp import cpp_times
-
-            times = cpp_times(harness, peer, Path(cache_dir) / "pinocchio-cpp")
-            row.update({"cpp_fd_us": times["aba"], "cpp_id_us": times["rnea"],
-                        "cpp_M_us": times["crba"], "cpp_stored_fd_us": times["aba_stored"],
-                        "cpp_stored_id_us": times["rnea_stored"],
-                        "cpp_stored_M_us": times["crba_stored"]})
+            time_batched_against_cpp(row, dyn, harness, peer, Path(cache_dir) / "pinocchio-cpp")
         if progress:
             progress(f"{row['model']:<14} per call FD {row['fd_us']:.2f} µs (Pinocchio "
                      f"{row['pin_fd_us']:.2f}), ID {row['id_us']:.2f} ({row['pin_id_us']:.2f}), "
