@@ -53,7 +53,9 @@ class CSEResult:
         for key, values in outputs.items():
             self.outputs[key] = reduced_out[k: k + len(values)]
             k += len(values)
-        self.ops_after = _ops(a.expr for a in self.assignments) + _ops(reduced_out)
+        # without elimination the program is the one counted before (in another order)
+        self.ops_after = (_ops(a.expr for a in self.assignments) + _ops(reduced_out)
+                          if eliminate else self.ops_before)
 
     def needed(self, exprs) -> list[Assignment]:
         """The assignments these expressions depend on, in the shared order."""

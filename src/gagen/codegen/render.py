@@ -696,14 +696,14 @@ def _stages(eqs: Equations, kernels: _Kernels, inline_stage_ops: int) -> Stages:
 
 
 def _regressor_blocks(eqs: Equations, kernels: _Kernels, config: CodegenConfig,
-                      reg: RegressorKinematics) -> dict[str, CodeBlock]:
+                      reg: RegressorKinematics, parameters: list[sp.Expr]
+                      ) -> dict[str, CodeBlock]:
     """The regressor's functions: the per-body kinematics its C loop reads and pi
-    (model/regressor.c.j2), from a CSE of their own (eliminating as the dynamics' does):
+    (`parameters`; model/regressor.c.j2), from a CSE of their own (eliminating as the dynamics' does):
     what they share with the dynamics is in different C functions anyway, and the
     dynamics' kernels stay as they are without it. Their segment functions, if any, join
     `kernels`'."""
-    outputs = {"regressor_kinematics": reg.values,
-               "regressor_parameters": regressor_parameters(eqs.model)}
+    outputs = {"regressor_kinematics": reg.values, "regressor_parameters": parameters}
     program = needed_definitions(reg.intermediates,
                                  [e for values in outputs.values() for e in values])
     cse = CSEResult(eqs, kernels.cse.eliminated, program, outputs)
@@ -745,6 +745,7 @@ def generate(eqs: Equations, module_name: str, key: str,
         eqs = add_frame_kinematics(eqs)
     reg = regressor_kinematics(eqs)
     model = eqs.model
+    reg_parameters = regressor_parameters(model)  # pi (symbolic: computed once)
     ident = c_identifier(model.name)
     cse = CSEResult(eqs, eqs.derivation == "gibbs-appell" if config.cse is None else config.cse)
     printer = GagenCPrinter(_symbol_names(eqs, cse), list(eqs.coords.q), config.fast_trig)
@@ -764,14 +765,14 @@ def generate(eqs: Equations, module_name: str, key: str,
                                     [f"X[{k}]" for k in range(len(out["placements"]))]),
         "frame_offsets": kernels.block("frame_offsets", out["frame_offsets"],
                                        [f"F[{k}]" for k in range(len(out["frame_offsets"]))]),
-        **_regressor_blocks(eqs, kernels, config, reg),
+        **_regressor_blocks(eqs, kernels, config, reg, reg_parameters),
     }
     stages = _stages(eqs, kernels, config.inline_stage_ops)
     info = ModelInfo.from_model(model)
     zero = {(r, s) for (r, s), e in zip(lower, out["mass_matrix"]) if e == 0}
     context = {
         **model_context(eqs),
-        "nreg": len(regressor_parameters(model)),
+        "nreg": len(reg_parameters),
         "reg": reg,
         "per_body": KINEMATICS_PER_BODY,
         "width_index": friction_width_index(eqs),
