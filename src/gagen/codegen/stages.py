@@ -72,23 +72,23 @@ class _Hoister:
         args = expr.args
         if expr.is_Add or expr.is_Mul:
             fixed = [a for a in args if self.is_position(a)]
-            old = [a for a in args if not self.is_position(a)]
-            moving = [self(a) for a in old]
+            others = [a for a in args if not self.is_position(a)]
+            before = fixed + others  # the arguments, reordered
+            moving = [self(a) for a in others]
             if len(fixed) > 1:
                 group = expr.func(*fixed)
                 if not _trivial(group):
                     fixed = [self.symbol_for(group)]
             elif len(fixed) == 1:
                 fixed = [self.symbol_for(fixed[0])]
-            new = fixed + moving
-            old = [a for a in args if self.is_position(a)] + old
+            after = fixed + moving
         else:
-            new = [self(a) for a in args]
-            old = args
-        # the same arguments: the same expression (SymPy's construction is the costly part)
-        if len(new) == len(old) and all(a is b for a, b in zip(new, old)):
+            before, after = args, [self(a) for a in args]
+        # the same arguments make the same (canonical) expression: SymPy's construction is
+        # the costly part, and most nodes on the way down to a hoisted part keep theirs
+        if len(after) == len(before) and all(a is b for a, b in zip(after, before)):
             return expr
-        return expr.func(*new)
+        return expr.func(*after)
 
 
 def split_stages(assignments: list[Assignment], position_outputs: list[sp.Expr],
