@@ -141,6 +141,7 @@ class GagenCPrinter(C99CodePrinter):
         self._kinds: dict[type, str | None] = {}  # ... and its kind (_resolve)
         self._floats: dict[tuple, str] = {}  # a Float's C text, by value and precision
         self._leaf_cache: dict[sp.Expr, tuple[frozenset, frozenset]] = {}
+        self._reads: dict[sp.Expr, frozenset[str]] = {}
 
     def name_of(self, symbol: sp.Symbol) -> str:
         """The C name a symbol prints as."""
@@ -185,10 +186,14 @@ class GagenCPrinter(C99CodePrinter):
 
     def reads(self, expr: sp.Expr) -> frozenset[str]:
         """The C names an expression reads: its symbols' and its sin/cos locals."""
-        symbols, trig = self._leaves(expr)
-        names = {self._names[s] for s in symbols if s in self._names}
-        names.update(f"{kind}{k}" for kind, k in trig)
-        return frozenset(names)
+        names = self._reads.get(expr)
+        if names is None:
+            symbols, trig = self._leaves(expr)
+            named = [self._names[s] for s in symbols if s in self._names]
+            names = frozenset(named).union(f"{kind}{k}" for kind, k in trig)
+            if len(named) == len(symbols):  # kept once final: names are never unbound
+                self._reads[expr] = names
+        return names
 
     def trig_prelude(self, exprs) -> list[str]:
         """C statements that set sn<k>, cs<k> for the coordinates whose sin or cos `exprs` use."""
