@@ -50,19 +50,26 @@ def test_generated_rrr_matches_golden_files():
 
 
 def test_generation_is_byte_identical_across_processes(tmp_path):
+    # also with the kernels split into segment functions (workspace slots, imports, exports)
     script = textwrap.dedent("""
-        import hashlib, sys
+        import sys
+        from pathlib import Path
         import gagen
         from gagen.building.builder import generate_sources
-        generate_sources(gagen.resolve_model(sys.argv[1]), __import__("pathlib").Path(sys.argv[2]))
+        from gagen.codegen.config import CodegenConfig
+        model = gagen.resolve_model(sys.argv[1])
+        generate_sources(model, Path(sys.argv[2]) / "whole")
+        generate_sources(model, Path(sys.argv[2]) / "split",
+                         config=CodegenConfig(split_chars=1_000, segment_chars=300))
     """)
     digests = []
     for seed in ("1", "2"):
         out = tmp_path / seed
         env = dict(os.environ, PYTHONHASHSEED=seed)
         subprocess.run([sys.executable, "-c", script, "chain:4", str(out)], check=True, env=env)
-        digests.append({p.name: hashlib.sha256(p.read_bytes()).hexdigest()
-                        for p in sorted(out.iterdir())})
+        digests.append({str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest()
+                        for p in sorted(out.rglob("*")) if p.is_file()})
+    assert any(name.startswith("split/kernels_") for name in digests[0])
     assert digests[0] == digests[1]
 
 

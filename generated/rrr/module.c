@@ -73,7 +73,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "63ee9cefd72365fbe40ab33b3517b0f9f92bf091eaeca093f69106da7d59498f") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "46d2a36f8a9dfa62701b328bff5b8c1e616845a045f6bf70354480d689a67f51") < 0) {
         Py_DECREF(module);
         return NULL;
     }

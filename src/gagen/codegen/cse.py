@@ -53,11 +53,13 @@ class CSEResult:
         for key, values in outputs.items():
             self.outputs[key] = reduced_out[k: k + len(values)]
             k += len(values)
-        self.ops_after = _ops(a.expr for a in self.assignments) + _ops(reduced_out)
+        # without elimination the program is the one counted before (in another order)
+        self.ops_after = (_ops(a.expr for a in self.assignments) + _ops(reduced_out)
+                          if eliminate else self.ops_before)
 
     def needed(self, exprs) -> list[Assignment]:
         """The assignments these expressions depend on, in the shared order."""
-        defined = {a.symbol: a for a in self.assignments}
+        defined = self._defined()
         need: set[sp.Symbol] = set()
         stack = [s for e in exprs for s in e.free_symbols if s in defined]
         while stack:
@@ -66,6 +68,14 @@ class CSEResult:
                 need.add(s)
                 stack.extend(d for d in defined[s].deps if d not in need)
         return [a for a in self.assignments if a.symbol in need]
+
+    def _defined(self) -> dict[sp.Symbol, Assignment]:
+        """The assignments by symbol (kept: every kernel asks)."""
+        cached = getattr(self, "_by_symbol", None)
+        if cached is None or cached[0] != len(self.assignments):
+            cached = self._by_symbol = (len(self.assignments),
+                                        {a.symbol: a for a in self.assignments})
+        return cached[1]
 
 
 def _ops(exprs) -> int:
@@ -87,10 +97,12 @@ def operation_count(exprs) -> int:
             stack.extend((a, True) for a in e.args)
         elif e.is_Mul:
             coefficient, factors = e.as_coeff_mul()
-            total += len(factors) - 1 + (coefficient not in (1, -1)) \
-                + (coefficient == -1 and not in_sum)
+            # 1 or -1 for those Integers, else 0 (a Float never equals an Integer in SymPy);
+            # comparing SymPy numbers with == sympifies, a third of this function's time
+            unit = coefficient.p if (coefficient.is_Integer and coefficient.p in (1, -1)) else 0
+            total += len(factors) - 1 + (unit == 0) + (unit == -1 and not in_sum)
             for f in factors:
-                if f.is_Pow and f.exp == -1:  # a division instead of a multiplication
+                if f.is_Pow and f.exp is sp.S.NegativeOne:  # a division, not a product
                     total += len(factors) == 1
                     stack.append((f.base, False))
                 else:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import jinja2
 import sympy as sp
+from sympy.core.function import Function
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE, precedence
 
@@ -94,6 +95,21 @@ def _balanced_sum(terms: list[tuple[bool, str]]) -> str:
     return f"{left} + ({_balanced_sum(right)})"
 
 
+class _Unusual(Exception):
+    """An expression the fast printer leaves to SymPy's printer as a whole."""
+
+
+# The node types gagen's expressions are made of, printed by GagenCPrinter's fast path;
+# any other node is printed by SymPy's printer (`GagenCPrinter._print`).
+_FAST_TYPES = ("Symbol", "Integer", "Rational", "Float", "Add", "Mul", "Pow", "sin", "cos",
+               "sign")
+_ADD, _MUL, _POW, _FUNC, _ATOM = (PRECEDENCE[k] for k in ("Add", "Mul", "Pow", "Func", "Atom"))
+# SymPy's level for the one factor of a negated product (codeprinter.CodePrinter._print_Mul)
+_NEGATED = 0.5 * (_POW + _MUL)
+_KIND_PRECEDENCE = {"Symbol": _ATOM, "Add": _ADD, "Mul": _MUL, "Pow": _POW, "sin": _FUNC,
+                    "cos": _FUNC, "sign": _FUNC}
+
+
 class GagenCPrinter(C99CodePrinter):
     """C99 printer that names symbols by array slot and avoids pow() for small powers.
 
@@ -102,6 +118,16 @@ class GagenCPrinter(C99CodePrinter):
     gagen_sign(x) (0 at 0), or, while `smooth_sign_width` holds the C text of a width w,
     as gagen_smooth_sign(x, w) = tanh(x / w) (the simulation's velocity stage), and
     f*sign(x) then as gagen_coulomb(f, x, w).
+
+    `doprint` takes a fast path for the nodes gagen's expressions are made of (symbols,
+    numbers, sums, products, small integer powers, sin, cos and sign): it walks `expr.args`
+    in SymPy's canonical order, which is deterministic, where SymPy's printer sorts every
+    sum's terms and asks each node for its precedence and sign through the assumptions
+    (about ten times slower). The C it writes is SymPy's printer's (`sympy_doprint`) up to
+    the order of terms and factors: the same numbers (`(1.0/4.0)`, Floats to 17 digits),
+    parentheses, `x*x` for small powers, `1.0/x`, negative terms as subtractions, the
+    balanced sums. Other nodes go to SymPy's printer, and an expression it cannot print
+    plainly (an unsupported function, a number constant, UnevaluatedExpr) goes to it whole.
     """
 
     smooth_sign_width: str | None = None
@@ -114,6 +140,11 @@ class GagenCPrinter(C99CodePrinter):
         self._fast_trig = fast_trig
         self._names = names
         self._angles = {q: k for k, q in enumerate(coordinates)}
+        self._dispatch: dict[type, object] = {}  # node type -> its fast method ...
+        self._kinds: dict[type, str | None] = {}  # ... and its kind (_resolve)
+        self._floats: dict[tuple, str] = {}  # a Float's C text, by value and precision
+        self._leaf_cache: dict[sp.Expr, tuple[frozenset, frozenset]] = {}
+        self._reads: dict[sp.Expr, frozenset[str]] = {}
 
     def name_of(self, symbol: sp.Symbol) -> str:
         """The C name a symbol prints as."""
@@ -127,30 +158,45 @@ class GagenCPrinter(C99CodePrinter):
         """Give more symbols their C names (the locals hoisted into a stage)."""
         self._names.update(names)
 
-    def _print_Symbol(self, expr):
-        return self._names[expr]
+    # -- what an expression reads ------------------------------------------------------
 
-    def _print_sin(self, expr):
-        k = self._angles.get(expr.args[0])
-        return f"sn{k}" if k is not None else self._print_Function(expr)
-
-    def _print_cos(self, expr):
-        k = self._angles.get(expr.args[0])
-        return f"cs{k}" if k is not None else self._print_Function(expr)
+    def _leaves(self, expr: sp.Expr) -> tuple[frozenset, frozenset]:
+        """The symbols an expression reads and the sin/cos locals of coordinates it uses
+        (("sn" or "cs", k) pairs), found in one walk and kept: every assignment is asked
+        for by several kernels (sympy's atoms() and free_symbols walk it each time)."""
+        found = self._leaf_cache.get(expr)
+        if found is None:
+            symbols, trig = set(), set()
+            angles, trig_types = self._angles, (sp.sin, sp.cos)
+            stack = [expr]
+            while stack:
+                e = stack.pop()
+                if e.is_Symbol:
+                    symbols.add(e)
+                    continue
+                args = e.args
+                if args:
+                    if e.is_Function and isinstance(e, trig_types) and args[0] in angles:
+                        trig.add(("sn" if isinstance(e, sp.sin) else "cs", angles[args[0]]))
+                    stack.extend(args)
+            found = (frozenset(symbols), frozenset(trig))
+            self._leaf_cache[expr] = found
+        return found
 
     def trig_used(self, exprs) -> list[int]:
         """The coordinates whose sin or cos `exprs` use, in order."""
-        return sorted({self._angles[f.args[0]] for e in exprs for f in e.atoms(sp.sin, sp.cos)
-                       if f.args[0] in self._angles})
+        return sorted({k for e in exprs for _, k in self._leaves(e)[1]})
 
     def reads(self, expr: sp.Expr) -> frozenset[str]:
         """The C names an expression reads: its symbols' and its sin/cos locals."""
-        names = {self._names[s] for s in expr.free_symbols if s in self._names}
-        for f in expr.atoms(sp.sin, sp.cos):
-            k = self._angles.get(f.args[0])
-            if k is not None:
-                names.add(f"{'sn' if isinstance(f, sp.sin) else 'cs'}{k}")
-        return frozenset(names)
+        names = self._reads.get(expr)
+        if names is None:
+            symbols, trig = self._leaves(expr)
+            named = [self._names[s] for s in symbols if s in self._names]
+            names = frozenset(named).union(f"{kind}{k}" for kind, k in trig)
+            if len(named) == len(symbols):  # kept once final: names are never unbound
+                self._reads[expr] = names
+        return names
 
     def trig_prelude(self, exprs) -> list[str]:
         """C statements that set sn<k>, cs<k> for the coordinates whose sin or cos `exprs` use."""
@@ -166,6 +212,216 @@ class GagenCPrinter(C99CodePrinter):
             k = used[-1]
             lines.append(f"gagen_sincos(q[{k}], &sn{k}, &cs{k});")
         return lines
+
+    # -- the fast path -------------------------------------------------------------------
+
+    def doprint(self, expr, assign_to=None):
+        """The C text of an expression (the fast path; `sympy_doprint` is SymPy's own)."""
+        if assign_to is not None or not isinstance(expr, sp.Basic):
+            return super().doprint(expr, assign_to)
+        self._not_supported, self._number_symbols = set(), set()
+        try:
+            text = self._fast(expr)
+        except _Unusual:
+            text = None
+        if text is None or self._not_supported or self._number_symbols or "\n" in text:
+            return super().doprint(expr)
+        return text
+
+    def sympy_doprint(self, expr) -> str:
+        """The C text of an expression as SymPy's printer writes it, its terms sorted."""
+        return super().doprint(expr)
+
+    def _fast(self, expr) -> str:
+        method = self._dispatch.get(type(expr))
+        if method is None:
+            method = self._resolve(type(expr))[0]
+        return method(expr)
+
+    def _resolve(self, cls: type) -> tuple:
+        """The fast method of a node type and its kind (a name of _FAST_TYPES, or None for
+        SymPy's printer): the method SymPy's dispatch would reach through the same class
+        (Coordinate and Internal are Symbols)."""
+        kind = None
+        if not (hasattr(cls, self.printmethod) or issubclass(cls, sp.UnevaluatedExpr)):
+            if issubclass(cls, Function):  # SymPy's dispatch treats subclasses apart
+                if cls in (sp.sin, sp.cos, sp.sign):
+                    kind = cls.__name__
+            else:
+                for base in cls.__mro__:
+                    if base.__name__ in _FAST_TYPES and base.__module__.startswith("sympy."):
+                        kind = base.__name__
+                        break
+                    if hasattr(self, "_print_" + base.__name__):
+                        break  # SymPy's printer has a method of its own first (Zero, Dummy)
+        method = self._sympy_node if kind is None else getattr(self, "_fast_" + kind)
+        self._dispatch[cls], self._kinds[cls] = method, kind
+        return method, kind
+
+    def _kind(self, expr) -> str | None:
+        cls = type(expr)
+        return self._kinds[cls] if cls in self._kinds else self._resolve(cls)[1]
+
+    def _sympy_node(self, expr) -> str:
+        """An unusual node, printed by SymPy's printer."""
+        if expr.has(sp.UnevaluatedExpr):
+            raise _Unusual  # doprint rewrites these first
+        return self._print(expr)
+
+    def _prec(self, expr) -> float:
+        """SymPy's precedence of a node, where it matters to the fast path. A product's is
+        that of a Mul whatever its sign: its parents parenthesise it either way."""
+        kind = self._kind(expr)
+        if kind is None:
+            return precedence(expr)
+        if kind == "Integer":
+            return _ADD if expr.p < 0 else _ATOM
+        if kind == "Rational":
+            return _ADD if expr.p < 0 else _MUL
+        if kind == "Float":
+            return _ADD if self._fast_Float(expr).startswith("-") else _ATOM
+        return _KIND_PRECEDENCE[kind]
+
+    def _paren(self, expr, level: float) -> str:
+        """A node's text, in parentheses if its precedence is at most `level` (SymPy's
+        parenthesize, not strict)."""
+        text = self._fast(expr)
+        return f"({text})" if self._prec(expr) <= level else text
+
+    def _fast_Symbol(self, expr) -> str:
+        return self._names[expr]
+
+    def _fast_Integer(self, expr) -> str:
+        return str(expr.p)
+
+    def _fast_Rational(self, expr) -> str:
+        return f"{expr.p}.0/{expr.q}.0"  # C89CodePrinter._print_Rational
+
+    def _fast_Float(self, expr) -> str:
+        key = (expr._mpf_, expr._prec)
+        text = self._floats.get(key)
+        if text is None:
+            text = self._floats[key] = self._print_Float(expr)  # 17 digits: round trip
+        return text
+
+    def _fast_sin(self, expr) -> str:
+        k = self._angles.get(expr.args[0])
+        return f"sn{k}" if k is not None else self._fast_function(expr)
+
+    def _fast_cos(self, expr) -> str:
+        k = self._angles.get(expr.args[0])
+        return f"cs{k}" if k is not None else self._fast_function(expr)
+
+    def _fast_function(self, expr) -> str:
+        name = self.known_functions.get(type(expr).__name__)
+        if not isinstance(name, str):
+            return self._sympy_node(expr)
+        return f"{name}({self._fast(expr.args[0])})"
+
+    def _fast_sign(self, expr) -> str:
+        arg = self._fast(expr.args[0])
+        if self.smooth_sign_width is None:
+            return f"gagen_sign({arg})"
+        return f"gagen_smooth_sign({arg}, {self.smooth_sign_width})"
+
+    def _fast_Add(self, expr) -> str:
+        terms = []
+        for term in expr.args:
+            text = self._fast(term)
+            if term.is_Add:
+                terms.append((False, f"({text})"))
+                continue
+            negative = text.startswith("-")
+            if negative:
+                text = text[1:]
+            if self._prec(term) < _ADD:
+                text = f"({text})"
+            terms.append((negative, text))
+        return _balanced_sum(terms)
+
+    def _fast_Pow(self, expr) -> str:
+        base, exp = expr.args
+        if exp.is_Integer:
+            k = exp.p
+            if 2 <= k <= 4:
+                return "*".join([self._paren(base, _MUL)] * k)
+            if k == -1:
+                return "1.0/" + self._paren(base, _MUL)
+            if -4 <= k <= -2:
+                return "1.0/(" + "*".join([self._paren(base, _MUL)] * -k) + ")"
+        return self._sympy_node(expr)
+
+    def _fast_Mul(self, expr) -> str:
+        """SymPy's CodePrinter._print_Mul, on the factors in their canonical order: the
+        coefficient's sign in front, the factors with negative powers as the divisor."""
+        args = expr.args
+        if self.smooth_sign_width is not None:
+            signs = [a for a in args if isinstance(a, sp.sign)]
+            if len(signs) == 1:
+                coefficient = sp.Mul(*[a for a in args if a is not signs[0]])
+                return (f"gagen_coulomb({self._fast(coefficient)}, "
+                        f"{self._fast(signs[0].args[0])}, {self.smooth_sign_width})")
+        sign = ""
+        numerator: list = []
+        first = args[0]
+        if first.is_Number:
+            kind = self._kind(first)
+            if kind not in ("Integer", "Rational", "Float"):
+                return self._sympy_node(expr)
+            if (first._mpf_[0] == 1) if kind == "Float" else first.p < 0:
+                sign, first = "-", -first
+            if kind == "Float" or first.p != 1 or first.q != 1:
+                numerator.append(first)  # 1.0 stays, as SymPy's _keep_coeff leaves it
+            args = args[1:]
+        divisor: list[tuple[sp.Expr, int]] = []
+        for factor in args:
+            kind = self._kind(factor)
+            if kind == "Pow":
+                exp = factor.exp
+                if not (exp.is_Integer and -4 <= exp.p <= 4):
+                    return self._sympy_node(expr)  # sqrt, pow(): SymPy's printer's choice
+                if exp.p < 0:
+                    divisor.append((factor.base, -exp.p))
+                    continue
+            elif kind is None or kind in ("Integer", "Rational", "Float"):
+                # M_PI_2 and the like, or a number out of place: SymPy's printer, whole
+                return self._sympy_node(expr)
+            numerator.append(factor)
+        level = _ADD if sign else _MUL
+        if not numerator:
+            text = "1"
+        elif len(numerator) == 1 and sign:
+            text = self._paren(numerator[0], _NEGATED)
+        else:
+            text = "*".join([self._paren(f, level) for f in numerator])
+        if not divisor:
+            return sign + text
+        # a divisor is parenthesised as a Mul's whatever the sign: a/(x*y), never a/x*y
+        parts = ["*".join([self._paren(base, _MUL)] * k) for base, k in divisor]
+        if len(divisor) == 1 and divisor[0][1] == 1:
+            return f"{sign}{text}/{parts[0]}"
+        return f"{sign}{text}/({'*'.join(parts)})"
+
+    # -- SymPy's printer (fallbacks and `sympy_doprint`) ---------------------------------
+
+    def parenthesize(self, item, level, strict=False):
+        # x**2 prints as the product x*x: under a product's operators it needs parentheses
+        # as a product does (SymPy's rank for a power left a/x**2 as a/x*x)
+        if (isinstance(item, sp.Pow) and item.exp.is_Integer and 2 <= abs(item.exp.p) <= 4
+                and level >= _ADD):
+            return f"({self._print(item)})"
+        return super().parenthesize(item, level, strict)
+
+    def _print_Symbol(self, expr):
+        return self._names[expr]
+
+    def _print_sin(self, expr):
+        k = self._angles.get(expr.args[0])
+        return f"sn{k}" if k is not None else self._print_Function(expr)
+
+    def _print_cos(self, expr):
+        k = self._angles.get(expr.args[0])
+        return f"cs{k}" if k is not None else self._print_Function(expr)
 
     def _print_sign(self, expr):
         arg = self._print(expr.args[0])
@@ -448,14 +704,14 @@ def _stages(eqs: Equations, kernels: _Kernels, inline_stage_ops: int) -> Stages:
 
 
 def _regressor_blocks(eqs: Equations, kernels: _Kernels, config: CodegenConfig,
-                      reg: RegressorKinematics) -> dict[str, CodeBlock]:
+                      reg: RegressorKinematics, parameters: list[sp.Expr]
+                      ) -> dict[str, CodeBlock]:
     """The regressor's functions: the per-body kinematics its C loop reads and pi
-    (model/regressor.c.j2), from a CSE of their own (eliminating as the dynamics' does):
+    (`parameters`; model/regressor.c.j2), from a CSE of their own (eliminating as the dynamics' does):
     what they share with the dynamics is in different C functions anyway, and the
     dynamics' kernels stay as they are without it. Their segment functions, if any, join
     `kernels`'."""
-    outputs = {"regressor_kinematics": reg.values,
-               "regressor_parameters": regressor_parameters(eqs.model)}
+    outputs = {"regressor_kinematics": reg.values, "regressor_parameters": parameters}
     program = needed_definitions(reg.intermediates,
                                  [e for values in outputs.values() for e in values])
     cse = CSEResult(eqs, kernels.cse.eliminated, program, outputs)
@@ -498,6 +754,7 @@ def generate(eqs: Equations, module_name: str, key: str,
         eqs = add_frame_kinematics(eqs)
     reg = regressor_kinematics(eqs)
     model = eqs.model
+    reg_parameters = regressor_parameters(model)  # pi (symbolic: computed once)
     ident = c_identifier(model.name)
     cse = CSEResult(eqs, eqs.derivation == "gibbs-appell" if config.cse is None else config.cse)
     printer = GagenCPrinter(_symbol_names(eqs, cse), list(eqs.coords.q), config.fast_trig)
@@ -522,13 +779,13 @@ def generate(eqs: Equations, module_name: str, key: str,
                                     [f"X[{k}]" for k in range(len(out["placements"]))]),
         "frame_offsets": kernels.block("frame_offsets", out["frame_offsets"],
                                        [f"F[{k}]" for k in range(len(out["frame_offsets"]))]),
-        **_regressor_blocks(eqs, kernels, config, reg),
+        **_regressor_blocks(eqs, kernels, config, reg, reg_parameters),
     }
     stages = _stages(eqs, kernels, config.inline_stage_ops)
     info = ModelInfo.from_model(model)
     context = {
         **model_context(eqs),
-        "nreg": len(regressor_parameters(model)),
+        "nreg": len(reg_parameters),
         "reg": reg,
         "per_body": KINEMATICS_PER_BODY,
         "width_index": friction_width_index(eqs),

@@ -164,8 +164,9 @@ def _slots(where: dict[str, int], last_use: dict[str, int], count: int) -> dict[
     """A workspace slot for every value read by a later segment, reused after its last
     reader: a slot freed by values last read in segment k serves values defined after k."""
     defined_in: dict[int, list[str]] = {k: [] for k in range(count)}
-    for value in last_use:
-        defined_in[where[value]].append(value)
+    for value in where:  # in the order of definition: last_use's comes from sets of names
+        if value in last_use:
+            defined_in[where[value]].append(value)
     released_after: dict[int, list[int]] = {k: [] for k in range(count)}
     free: list[int] = []
     size = 0

@@ -69,15 +69,26 @@ class _Hoister:
             return expr
         if self.is_position(expr):
             return self.symbol_for(expr)
+        args = expr.args
         if expr.is_Add or expr.is_Mul:
-            fixed = [a for a in expr.args if self.is_position(a)]
-            moving = [self(a) for a in expr.args if not self.is_position(a)]
-            if len(fixed) > 1 and not _trivial(expr.func(*fixed)):
-                fixed = [self.symbol_for(expr.func(*fixed))]
+            fixed = [a for a in args if self.is_position(a)]
+            others = [a for a in args if not self.is_position(a)]
+            before = fixed + others  # the arguments, reordered
+            moving = [self(a) for a in others]
+            if len(fixed) > 1:
+                group = expr.func(*fixed)
+                if not _trivial(group):
+                    fixed = [self.symbol_for(group)]
             elif len(fixed) == 1:
                 fixed = [self.symbol_for(fixed[0])]
-            return expr.func(*fixed, *moving)
-        return expr.func(*[self(a) for a in expr.args])
+            after = fixed + moving
+        else:
+            before, after = args, [self(a) for a in args]
+        # the same arguments make the same (canonical) expression: SymPy's construction is
+        # the costly part, and most nodes on the way down to a hoisted part keep theirs
+        if len(after) == len(before) and all(a is b for a, b in zip(after, before)):
+            return expr
+        return expr.func(*after)
 
 
 def split_stages(assignments: list[Assignment], position_outputs: list[sp.Expr],
@@ -90,16 +101,29 @@ def split_stages(assignments: list[Assignment], position_outputs: list[sp.Expr],
     only (qd, tau).
     """
     moving: set[sp.Symbol] = set()
+    depends = set(velocity_inputs)
     for a in assignments:
-        if a.expr.free_symbols & (velocity_inputs | moving):
+        if not depends.isdisjoint(a.expr.free_symbols):
             moving.add(a.symbol)
-    depends = velocity_inputs | moving
+            depends.add(a.symbol)
     for e in position_outputs:
-        if e.free_symbols & depends:
+        if not depends.isdisjoint(e.free_symbols):
             raise ValueError(f"a position output depends on the velocities: {e}")
+    known_position: dict[sp.Expr, bool] = {}
 
     def is_position(e: sp.Expr) -> bool:
-        return not (e.free_symbols & depends)
+        """Whether `e` reads none of `depends`, from its arguments' answers (kept): the
+        hoister asks of every node at every level, and free_symbols walks the subtree."""
+        answer = known_position.get(e)
+        if answer is None:
+            if e.is_Symbol:
+                answer = e not in depends
+            elif e.is_Add or e.is_Mul or e.is_Pow or e.is_Function:
+                answer = all(is_position(a) for a in e.args)
+            else:
+                answer = depends.isdisjoint(e.free_symbols)
+            known_position[e] = answer
+        return answer
 
     known = {a.expr: a.symbol for a in assignments if a.symbol not in moving}
     hoist = _Hoister(is_position, known)
