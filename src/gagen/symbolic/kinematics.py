@@ -14,7 +14,9 @@ partial velocities of eqs. 7-10; alpha0 and aC0 are the parts of eq. 4 free of q
 
 from __future__ import annotations
 
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import sympy as sp
 
@@ -38,6 +40,7 @@ from .vec3 import (
 )
 
 Vec = sp.Matrix
+T = TypeVar("T")
 
 
 class Recorder:
@@ -48,6 +51,7 @@ class Recorder:
         self.definitions: list[tuple[Internal, sp.Expr]] = []
         self._by_expr: dict[sp.Expr, Internal] = {}
         self.next_index = 0  # the number of the next name (names are never reused)
+        self._cache: dict[Hashable, object] = {}
 
     def name(self, expr) -> sp.Expr:
         expr = sp.sympify(expr)
@@ -71,6 +75,18 @@ class Recorder:
     def named_rows(self, A) -> Mat3:
         """Each entry of a 3x3 matrix (rows) named."""
         return tuple(self.named(row) for row in A)
+
+    def cached(self, key: Hashable, compute: Callable[[], T]) -> T:
+        """compute(), once per key in this program; later calls return the first result.
+
+        For results that are a function of the key alone (an operation's name and its
+        operands, which are named expressions of this program): the recursive passes
+        rotate the same vectors and take the same products several times, and building
+        them again in SymPy, only to find their names already defined, is most of what a
+        repeated step costs."""
+        if key not in self._cache:
+            self._cache[key] = compute()
+        return self._cache[key]
 
 
 def _is_trivial(expr: sp.Expr) -> bool:

@@ -82,12 +82,15 @@ class Link:
     #                             the origin's velocity and the angular velocity in frame i
 
     def to_child(self, v: Vec3, rec: Recorder) -> Vec3:
-        """R^T v, named: a vector of the parent's frame in this one."""
-        return rec.named(mat_T_vec(self.R, v))
+        """R^T v, named: a vector of the parent's frame in this one (computed once per
+        vector: every pass of the RNEA turns the parent's angular velocity)."""
+        v = tuple(v)
+        return rec.cached(("R^T v", self.R, v), lambda: rec.named(mat_T_vec(self.R, v)))
 
     def to_parent(self, v: Vec3, rec: Recorder) -> Vec3:
         """R v, named: a vector of this frame in the parent's."""
-        return rec.named(mat_vec(self.R, v))
+        v = tuple(v)
+        return rec.cached(("R v", self.R, v), lambda: rec.named(mat_vec(self.R, v)))
 
 
 def derive_recursive(model: Model) -> Equations:
@@ -246,15 +249,21 @@ def accelerations(links: list[Link], coords: CoordinateSymbols, rec: Recorder,
             if qdd is not None:
                 alpha_in = add(alpha_in, scale(qdd[link.k], s))
             if w_in is not None:
-                alpha_in = add(alpha_in, cross(w_in, scale(coords.qd[link.k], s)))
+                alpha_in = add(alpha_in, _joint_bias(w_in, s, coords.qd[link.k], rec))
         elif link.k is not None:
             if qdd is not None:
                 a_in = add(a_in, scale(qdd[link.k], s))
             if w_in is not None:
-                a_in = add(a_in, scale(2, cross(w_in, scale(coords.qd[link.k], s))))
+                a_in = add(a_in, scale(2, _joint_bias(w_in, s, coords.qd[link.k], rec)))
         alpha.append(rec.named(alpha_in))
         acc.append(rec.named(a_in))
     return alpha, acc
+
+
+def _joint_bias(w_in: Vec3, s: Vec3, qd: sp.Expr, rec: Recorder) -> Vec3:
+    """w_in x (s qd): the acceleration a joint's rate adds as the parent turns (the same
+    in every pass with velocities)."""
+    return rec.cached(("w x s qd", w_in, s, qd), lambda: cross(w_in, scale(qd, s)))
 
 
 def _parent_accelerations(link: Link, alpha: list[Vec3], acc: list[Vec3],
@@ -266,8 +275,9 @@ def _parent_accelerations(link: Link, alpha: list[Vec3], acc: list[Vec3],
         return ZERO, link.to_child(base, rec)
     p = link.parent
     a = add(acc[p], cross(alpha[p], link.d))
-    if w is not None:
-        a = add(a, cross(w[p], rec.named(cross(w[p], link.d))))
+    if w is not None:  # the same in every pass with velocities
+        a = add(a, rec.cached(("w x (w x d)", w[p], link.d),
+                              lambda: cross(w[p], rec.named(cross(w[p], link.d)))))
     return link.to_child(alpha[p], rec), link.to_child(a, rec)
 
 
@@ -280,9 +290,17 @@ def _body_wrench(link: Link, alpha: Vec3, a: Vec3, w: Vec3 | None,
     f = add(scale(link.mass, a), cross(alpha, link.h))
     n = add(mat_vec(link.I_O, alpha), cross(link.h, a))
     if w is not None and not all(is_zero(e) for e in w):  # not at rest
-        f = add(f, cross(w, rec.named(cross(w, link.h))))
-        n = add(n, cross(w, rec.named(mat_vec(link.I_O, w))))
+        f_w, n_w = rec.cached(("w x (w x h), w x I_O w", w, link.h, link.I_O),
+                              lambda: _velocity_wrench(link, w, rec))
+        f, n = add(f, f_w), add(n, n_w)
     return rec.named(f), rec.named(n)
+
+
+def _velocity_wrench(link: Link, w: Vec3, rec: Recorder) -> tuple[Vec3, Vec3]:
+    """The terms of a body's momentum rate due to its angular velocity alone (the same in
+    every pass with velocities): w x (w x h) and w x I_O w."""
+    return (cross(w, rec.named(cross(w, link.h))),
+            cross(w, rec.named(mat_vec(link.I_O, w))))
 
 
 def _crba(links: list[Link], n: int, rec: Recorder) -> sp.Matrix:
