@@ -67,18 +67,20 @@ from .vec3 import (
     IDENTITY,
     ZERO,
     Mat3,
+    Terms,
     Vec3,
     add,
     as_vec,
     cross,
+    cross_terms,
     dot,
     mat_add,
     mat_mat,
     mat_mat_T,
     mat_scale,
     mat_sub,
-    mat_T_vec,
-    mat_vec,
+    mat_T_vec_terms,
+    mat_vec_terms,
     neg,
     outer,
     scale,
@@ -108,8 +110,13 @@ class Inertia:
 
     def times(self, w: Vec3, v: Vec3) -> tuple[Vec3, Vec3]:
         """I (w, v): the force (moment, force) of a motion."""
-        return (add(mat_vec(self.A, w), mat_vec(self.B, v)),
-                add(mat_T_vec(self.B, w), mat_vec(self.C, v)))
+        n, f = self.times_terms(w, v)
+        return n.vec(), f.vec()
+
+    def times_terms(self, w: Vec3, v: Vec3) -> tuple[Terms, Terms]:
+        """I (w, v) as terms."""
+        return (mat_vec_terms(self.A, w) + mat_vec_terms(self.B, v),
+                mat_T_vec_terms(self.B, w) + mat_vec_terms(self.C, v))
 
     def matrix(self) -> sp.Matrix:
         """The 6x6 matrix, angular rows and columns first."""
@@ -246,7 +253,8 @@ def _project(link: Link, n: Vec3, f: Vec3) -> sp.Expr:
 
 def _motion_to_child(link: Link, w_p: Vec3, v_p: Vec3, rec: Recorder) -> tuple[Vec3, Vec3]:
     """X (w_p, v_p): a parent-frame motion (or spatial acceleration) in this frame."""
-    return link.to_child(w_p, rec), link.to_child(add(v_p, cross(w_p, link.d)), rec)
+    return (link.to_child(w_p, rec),
+            link.to_child((Terms.of(v_p) + cross_terms(w_p, link.d)).vec(), rec))
 
 
 def _velocity_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder):
@@ -267,11 +275,12 @@ def _velocity_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder):
         w, vel = rec.named(add(w_in, s_w)), rec.named(add(v_in, s_v))
         # v_i x (s qd) = (w x s_w, w x s_v + v x s_w); s x s = 0 lets w_in stand for w
         c.append((rec.named(cross(w_in, s_w)),
-                  rec.named(add(cross(w_in, s_v), cross(v_in, s_w)))))
+                  rec.named((cross_terms(w_in, s_v) + cross_terms(v_in, s_w)).vec())))
         v.append((w, vel))
         L, P = _rigid_inertia(link).times(w, vel)
         L, P = rec.named(L), rec.named(P)
-        bias.append((rec.named(add(cross(w, L), cross(vel, P))), rec.named(cross(w, P))))
+        bias.append((rec.named((cross_terms(w, L) + cross_terms(vel, P)).vec()),
+                     rec.named(cross(w, P))))
     return c, bias
 
 
@@ -319,14 +328,14 @@ def _articulated_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorde
             if exact:
                 Ia, n_a, f_a = _exact_articulated(link, force[link.k], Ia, n_a, f_a)
             Ia = Ia.named(rec)
-            In, If = Ia.times(*c[i])
-            n_i, f_i = rec.named(add(n_a, In)), rec.named(add(f_a, If))
+            In, If = Ia.times_terms(*c[i])
+            n_i, f_i = rec.named((Terms.of(n_a) + In).vec()), rec.named((Terms.of(f_a) + If).vec())
         if link.parent is None:
             continue
         up = _inertia_to_parent(link, Ia, rec)
         IA[link.parent] = IA[link.parent] + up
         f_up = link.to_parent(f_i, rec)
-        n_up = rec.named(add(mat_vec(link.R, n_i), cross(link.d, f_up)))
+        n_up = rec.named((mat_vec_terms(link.R, n_i) + cross_terms(link.d, f_up)).vec())
         pA[link.parent][0] = add(pA[link.parent][0], n_up)
         pA[link.parent][1] = add(pA[link.parent][1], f_up)
     return U, D, Dinv, u

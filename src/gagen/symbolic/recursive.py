@@ -42,11 +42,13 @@ from .vec3 import (
     IDENTITY,
     ZERO,
     Mat3,
+    Terms,
     Vec3,
     add,
     as_mat,
     as_vec,
     cross,
+    cross_terms,
     dot,
     expanded,
     is_zero,
@@ -56,9 +58,11 @@ from .vec3 import (
     mat_scale,
     mat_T_vec,
     mat_vec,
+    mat_vec_terms,
     neg,
     outer,
     scale,
+    scale_terms,
     skew,
     unit,
 )
@@ -204,23 +208,25 @@ def _rnea(links: list[Link], coords: CoordinateSymbols, rec: Recorder,
     the force F and moment N (about O_i) that the parent exerts through joint i.
     """
     alpha, acc = accelerations(links, coords, rec, w, qdd, gravity)
-    wrenches = [_body_wrench(link, alpha[i], acc[i], None if w is None else w[i], rec)
-                for i, link in enumerate(links)]
-    F = [f for f, _ in wrenches]
-    N = [n for _, n in wrenches]
+    # the wrenches, as terms until all children have added theirs
+    F: list[Terms] = []
+    N: list[Terms] = []
+    for i, link in enumerate(links):
+        f, n = _body_wrench(link, alpha[i], acc[i], None if w is None else w[i], rec)
+        F.append(Terms.of(f))
+        N.append(Terms.of(n))
     tau: list[sp.Expr] = [sp.Integer(0)] * len(coords.qd)
     for i in reversed(range(len(links))):
         link = links[i]
-        F[i], N[i] = rec.named(F[i]), rec.named(N[i])
+        f, n = rec.named(F[i].vec()), rec.named(N[i].vec())
         if link.free:  # the wrench on the body: force, then moment about its origin
-            tau[link.k: link.k + 6] = [*F[i], *N[i]]
+            tau[link.k: link.k + 6] = [*f, *n]
         elif link.k is not None:
-            tau[link.k] = rec.name(dot(link.axis, N[i] if link.rotates else F[i]))
+            tau[link.k] = rec.name(dot(link.axis, n if link.rotates else f))
         if link.parent is not None:
-            f_up = link.to_parent(F[i], rec)
-            F[link.parent] = add(F[link.parent], f_up)
-            N[link.parent] = add(N[link.parent], link.to_parent(N[i], rec),
-                                 cross(link.d, f_up))
+            f_up = link.to_parent(f, rec)
+            F[link.parent] += Terms.of(f_up)
+            N[link.parent] += Terms.of(link.to_parent(n, rec)) + cross_terms(link.d, f_up)
     return tau
 
 
@@ -233,7 +239,8 @@ def accelerations(links: list[Link], coords: CoordinateSymbols, rec: Recorder,
     alpha: list[Vec3] = []
     acc: list[Vec3] = []
     for i, link in enumerate(links):
-        alpha_in, a_in = _parent_accelerations(link, alpha, acc, w, base, rec)
+        alpha_p, a_p = _parent_accelerations(link, alpha, acc, w, base, rec)
+        alpha_in, a_in = Terms.of(alpha_p), Terms.of(a_p)
         w_in = None
         if w is not None and link.parent is not None:
             w_in = link.to_child(w[link.parent], rec)
@@ -242,21 +249,21 @@ def accelerations(links: list[Link], coords: CoordinateSymbols, rec: Recorder,
             v_lin, _ = free_velocities(link, coords.qd)
             if qdd is not None:
                 a_lin, a_ang = free_velocities(link, qdd)
-                alpha_in, a_in = add(alpha_in, a_ang), add(a_in, a_lin)
+                alpha_in, a_in = alpha_in + Terms.of(a_ang), a_in + Terms.of(a_lin)
             if w is not None:  # the origin's acceleration: d/dt of v's components + w x v
-                a_in = add(a_in, cross(w[i], v_lin))
+                a_in += cross_terms(w[i], v_lin)
         elif link.k is not None and link.rotates:
             if qdd is not None:
-                alpha_in = add(alpha_in, scale(qdd[link.k], s))
+                alpha_in += scale_terms(qdd[link.k], s)
             if w_in is not None:
-                alpha_in = add(alpha_in, _joint_bias(w_in, s, coords.qd[link.k], rec))
+                alpha_in += Terms.of(_joint_bias(w_in, s, coords.qd[link.k], rec))
         elif link.k is not None:
             if qdd is not None:
-                a_in = add(a_in, scale(qdd[link.k], s))
+                a_in += scale_terms(qdd[link.k], s)
             if w_in is not None:
-                a_in = add(a_in, scale(2, _joint_bias(w_in, s, coords.qd[link.k], rec)))
-        alpha.append(rec.named(alpha_in))
-        acc.append(rec.named(a_in))
+                a_in += scale_terms(2, _joint_bias(w_in, s, coords.qd[link.k], rec))
+        alpha.append(rec.named(alpha_in.vec()))
+        acc.append(rec.named(a_in.vec()))
     return alpha, acc
 
 
@@ -274,11 +281,11 @@ def _parent_accelerations(link: Link, alpha: list[Vec3], acc: list[Vec3],
     if link.parent is None:
         return ZERO, link.to_child(base, rec)
     p = link.parent
-    a = add(acc[p], cross(alpha[p], link.d))
+    a = Terms.of(acc[p]) + cross_terms(alpha[p], link.d)
     if w is not None:  # the same in every pass with velocities
-        a = add(a, rec.cached(("w x (w x d)", w[p], link.d),
-                              lambda: cross(w[p], rec.named(cross(w[p], link.d)))))
-    return link.to_child(alpha[p], rec), link.to_child(a, rec)
+        a += rec.cached(("w x (w x d)", w[p], link.d),
+                        lambda: cross_terms(w[p], rec.named(cross(w[p], link.d))))
+    return link.to_child(alpha[p], rec), link.to_child(a.vec(), rec)
 
 
 def _body_wrench(link: Link, alpha: Vec3, a: Vec3, w: Vec3 | None,
@@ -287,20 +294,20 @@ def _body_wrench(link: Link, alpha: Vec3, a: Vec3, w: Vec3 | None,
 
     f = m a_O + alpha x h + w x (w x h);  n = I_O alpha + w x I_O w + h x a_O.
     """
-    f = add(scale(link.mass, a), cross(alpha, link.h))
-    n = add(mat_vec(link.I_O, alpha), cross(link.h, a))
+    f = scale_terms(link.mass, a) + cross_terms(alpha, link.h)
+    n = mat_vec_terms(link.I_O, alpha) + cross_terms(link.h, a)
     if w is not None and not all(is_zero(e) for e in w):  # not at rest
         f_w, n_w = rec.cached(("w x (w x h), w x I_O w", w, link.h, link.I_O),
                               lambda: _velocity_wrench(link, w, rec))
-        f, n = add(f, f_w), add(n, n_w)
-    return rec.named(f), rec.named(n)
+        f, n = f + f_w, n + n_w
+    return rec.named(f.vec()), rec.named(n.vec())
 
 
-def _velocity_wrench(link: Link, w: Vec3, rec: Recorder) -> tuple[Vec3, Vec3]:
+def _velocity_wrench(link: Link, w: Vec3, rec: Recorder) -> tuple[Terms, Terms]:
     """The terms of a body's momentum rate due to its angular velocity alone (the same in
     every pass with velocities): w x (w x h) and w x I_O w."""
-    return (cross(w, rec.named(cross(w, link.h))),
-            cross(w, rec.named(mat_vec(link.I_O, w))))
+    return (cross_terms(w, rec.named(cross(w, link.h))),
+            cross_terms(w, rec.named(mat_vec(link.I_O, w))))
 
 
 def _crba(links: list[Link], n: int, rec: Recorder) -> sp.Matrix:
@@ -342,7 +349,7 @@ def _crba(links: list[Link], n: int, rec: Recorder) -> sp.Matrix:
             j, child = link.parent, link
             while j is not None:
                 f_up = child.to_parent(f, rec)
-                m_ = rec.named(add(mat_vec(child.R, m_), cross(child.d, f_up)))
+                m_ = rec.named((mat_vec_terms(child.R, m_) + cross_terms(child.d, f_up)).vec())
                 f = f_up
                 ancestor = links[j]
                 for row, value in _projections(ancestor, f, m_, rec):

@@ -13,11 +13,16 @@ with less work.
 A vector is a tuple of 3 expressions (`Vec3`), a matrix a tuple of 3 rows (`Mat3`). Their
 `+` would concatenate: add them with `add`, `sub`, `mat_add`. `as_vec` and `as_mat` take
 anything indexable (a sympy.Matrix, a list of numbers) and sympify its entries.
+
+A sum of several products (f = m a + alpha x h, say) is best added up as `Terms`: each
+product's terms, gathered per entry and added once (`(scale_terms(m, a) + cross_terms(alpha,
+h)).vec()`), instead of an Add per product whose terms the outer Add then takes apart again.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 
 import sympy as sp
 
@@ -95,6 +100,48 @@ def dot(a: Sequence[sp.Expr], b: Sequence[sp.Expr]) -> sp.Expr:
     return sum_of_products(zip(a, b))
 
 
+@dataclass(frozen=True)
+class Terms:
+    """A 3-vector as the terms of each entry, not yet added up."""
+
+    entries: tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...], tuple[sp.Expr, ...]]
+
+    @staticmethod
+    def of(v: Vec3) -> Terms:
+        """A vector's entries as one term each."""
+        return Terms(((v[0],), (v[1],), (v[2],)))
+
+    def __add__(self, other: Terms) -> Terms:
+        return Terms(tuple(a + b for a, b in zip(self.entries, other.entries)))
+
+    def vec(self) -> Vec3:
+        """The vector: one Add per entry over all its terms."""
+        return tuple(total(terms) for terms in self.entries)
+
+
+def scale_terms(k: sp.Expr | int, v: Vec3) -> Terms:
+    """k v, as terms."""
+    return Terms(tuple((product(k, e),) for e in v))
+
+
+def cross_terms(a: Vec3, b: Vec3) -> Terms:
+    """a x b, as terms."""
+    minus = sp.S.NegativeOne
+    return Terms(((product(a[1], b[2]), product(minus, a[2], b[1])),
+                  (product(a[2], b[0]), product(minus, a[0], b[2])),
+                  (product(a[0], b[1]), product(minus, a[1], b[0]))))
+
+
+def mat_vec_terms(A: Mat3, v: Vec3) -> Terms:
+    """A v, as terms."""
+    return Terms(tuple(tuple(product(a, x) for a, x in zip(row, v)) for row in A))
+
+
+def mat_T_vec_terms(A: Mat3, v: Vec3) -> Terms:
+    """A^T v, as terms (A is not transposed)."""
+    return Terms(tuple(tuple(product(A[k][c], v[k]) for k in range(3)) for c in range(3)))
+
+
 def add(*vectors: Vec3) -> Vec3:
     """The entrywise sum of vectors."""
     return tuple(total(v[i] for v in vectors) for i in range(3))
@@ -117,20 +164,17 @@ def scale(k: sp.Expr | int, v: Vec3) -> Vec3:
 
 def cross(a: Vec3, b: Vec3) -> Vec3:
     """a x b."""
-    minus = sp.S.NegativeOne
-    return (total((product(a[1], b[2]), product(minus, a[2], b[1]))),
-            total((product(a[2], b[0]), product(minus, a[0], b[2]))),
-            total((product(a[0], b[1]), product(minus, a[1], b[0]))))
+    return cross_terms(a, b).vec()
 
 
 def mat_vec(A: Mat3, v: Vec3) -> Vec3:
     """A v."""
-    return tuple(dot(row, v) for row in A)
+    return mat_vec_terms(A, v).vec()
 
 
 def mat_T_vec(A: Mat3, v: Vec3) -> Vec3:
     """A^T v, without transposing A."""
-    return tuple(sum_of_products((A[k][c], v[k]) for k in range(3)) for c in range(3))
+    return mat_T_vec_terms(A, v).vec()
 
 
 def mat_mat(A: Mat3, B: Mat3) -> Mat3:
