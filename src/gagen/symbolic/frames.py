@@ -46,6 +46,9 @@ def add_frame_kinematics(eqs: Equations) -> Equations:
         joint = body.joint
         iq = index.get(body.name, (0, 0))[0]
         R_j, d_j = joint_transform(joint, eqs.coords.q[iq: iq + joint.nq], rec)
+        # named as the derivation named them (the same names): each entry is read by
+        # three products below, and a sum would be written out in each
+        R_j, d_j = rec.named_rows(R_j), rec.named(d_j)
         R_p, p_p = placed[body.parent]
         R = rec.named_rows(mat_mat(R_p, R_j))
         p = rec.named(add(p_p, mat_vec(R_p, d_j)))

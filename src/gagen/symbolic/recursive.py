@@ -89,12 +89,25 @@ class Link:
         """R^T v, named: a vector of the parent's frame in this one (computed once per
         vector: every pass of the RNEA turns the parent's angular velocity)."""
         v = tuple(v)
-        return rec.cached(("R^T v", self.R, v), lambda: rec.named(mat_T_vec(self.R, v)))
+        return rec.cached(("R^T v", self.R, v), lambda: rec.named(
+            mat_T_vec(self.R, _name_shared(v, [_nonzeros(row) for row in self.R], rec))))
 
     def to_parent(self, v: Vec3, rec: Recorder) -> Vec3:
         """R v, named: a vector of this frame in the parent's."""
         v = tuple(v)
-        return rec.cached(("R v", self.R, v), lambda: rec.named(mat_vec(self.R, v)))
+        return rec.cached(("R v", self.R, v), lambda: rec.named(
+            mat_vec(self.R, _name_shared(v, [_nonzeros(col) for col in zip(*self.R)], rec))))
+
+
+def _name_shared(v: Vec3, uses: list[int], rec: Recorder) -> Vec3:
+    """v with the entries that more than one product reads (uses[k] of them read v[k])
+    named: an unnamed sum would be written out again in each product that reads it (and
+    a float coefficient distributed over its terms)."""
+    return tuple(rec.name(e) if n > 1 else e for e, n in zip(v, uses))
+
+
+def _nonzeros(entries) -> int:
+    return sum(1 for e in entries if not is_zero(e))
 
 
 def derive_recursive(model: Model) -> Equations:
