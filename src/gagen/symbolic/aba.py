@@ -62,7 +62,14 @@ from .differentiate import recorder_after
 from .gibbs_appell import Equations
 from .joints import armatures, dissipative_forces
 from .kinematics import CoordinateSymbols, Recorder
-from .recursive import Link, _links, _named_symmetric, _rotate_inertia, _symmetric, free_velocities
+from .recursive import (
+    Link,
+    _links,
+    _named_symmetric,
+    _rotate_inertia,
+    _symmetric,
+    free_velocities,
+)
 from .vec3 import (
     IDENTITY,
     ZERO,
@@ -376,12 +383,10 @@ def _exact_articulated(link: Link, tau, Ia: Inertia, n_a: Vec3, f_a: Vec3
         return Ia, n_a, f_a
     j, sign = found
     if link.rotates:  # the angular row and column j: A's, and B's row j
-        Ia = Inertia(_without_row(_without_row(Ia.A, j), j, column=True),
-                     _without_row(Ia.B, j), Ia.C)
+        Ia = Inertia(_without_row_and_column(Ia.A, j), _without_row(Ia.B, j), Ia.C)
         return Ia, _with_entry(n_a, j, sign * tau), f_a
     # the linear row and column j: C's, and B's column j
-    Ia = Inertia(Ia.A, _without_row(Ia.B, j, column=True),
-                 _without_row(_without_row(Ia.C, j), j, column=True))
+    Ia = Inertia(Ia.A, _without_column(Ia.B, j), _without_row_and_column(Ia.C, j))
     return Ia, n_a, _with_entry(f_a, j, sign * tau)
 
 
@@ -390,12 +395,18 @@ def _with_entry(v: Vec3, j: int, value: sp.Expr) -> Vec3:
     return tuple(value if i == j else e for i, e in enumerate(v))
 
 
-def _without_row(A: Mat3, j: int, column: bool = False) -> Mat3:
-    """A with its row j (or its column j) set to exact zeros."""
-    zero = sp.S.Zero
-    if column:
-        return tuple(_with_entry(row, j, zero) for row in A)
+def _without_row(A: Mat3, j: int) -> Mat3:
+    """A with its row j exact zeros."""
     return tuple(ZERO if r == j else row for r, row in enumerate(A))
+
+
+def _without_column(A: Mat3, j: int) -> Mat3:
+    """A with its column j exact zeros."""
+    return tuple(_with_entry(row, j, sp.S.Zero) for row in A)
+
+
+def _without_row_and_column(A: Mat3, j: int) -> Mat3:
+    return _without_column(_without_row(A, j), j)
 
 
 def _inertia_to_parent(link: Link, I: Inertia, rec: Recorder) -> Inertia:

@@ -30,7 +30,6 @@ Vec3 = tuple[sp.Expr, sp.Expr, sp.Expr]
 Mat3 = tuple[Vec3, Vec3, Vec3]
 
 ZERO: Vec3 = (sp.S.Zero, sp.S.Zero, sp.S.Zero)
-ZERO33: Mat3 = (ZERO, ZERO, ZERO)
 IDENTITY: Mat3 = ((sp.S.One, sp.S.Zero, sp.S.Zero),
                   (sp.S.Zero, sp.S.One, sp.S.Zero),
                   (sp.S.Zero, sp.S.Zero, sp.S.One))
@@ -244,8 +243,3 @@ def _is_monomial(e: sp.Expr) -> bool:
     factors = e.args if e.is_Mul else (e,)
     return all(f.is_Symbol or f.is_Number
                or (f.is_Pow and f.base.is_Symbol and f.exp.is_Integer) for f in factors)
-
-
-def to_matrix(x) -> sp.Matrix:
-    """A sympy.Matrix of a Vec3 (3 x 1) or a Mat3 (3 x 3), for the derivation's outputs."""
-    return sp.Matrix(x)
