@@ -73,7 +73,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "46d2a36f8a9dfa62701b328bff5b8c1e616845a045f6bf70354480d689a67f51") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "ac68e08b3b8e9f573b80dff1fb136258e72869b23a0fe7b08676eb02cda2f4ed") < 0) {
         Py_DECREF(module);
         return NULL;
     }

@@ -62,35 +62,73 @@ from .differentiate import recorder_after
 from .gibbs_appell import Equations
 from .joints import armatures, dissipative_forces
 from .kinematics import CoordinateSymbols, Recorder
-from .recursive import Link, _links, _skew, _symmetric, free_velocities
-
-Vec = sp.Matrix
-ZERO = sp.zeros(3, 1)
+from .recursive import (
+    Link,
+    _links,
+    _named_symmetric,
+    _rotate_inertia,
+    _symmetric,
+    free_velocities,
+)
+from .vec3 import (
+    IDENTITY,
+    ZERO,
+    Mat3,
+    Terms,
+    Vec3,
+    add,
+    as_vec,
+    cross,
+    cross_terms,
+    dot,
+    mat_add,
+    mat_mat,
+    mat_mat_T,
+    mat_scale,
+    mat_sub,
+    mat_T_vec_terms,
+    mat_vec_terms,
+    neg,
+    outer,
+    scale,
+    skew,
+    sub,
+    sum_of_products,
+    transpose,
+)
 
 
 @dataclass
 class Inertia:
     """A spatial inertia [A B; B^T C] about a frame's origin, in that frame's axes."""
 
-    A: sp.Matrix   # symmetric
-    B: sp.Matrix
-    C: sp.Matrix   # symmetric
+    A: Mat3   # symmetric
+    B: Mat3
+    C: Mat3   # symmetric
 
     def __add__(self, other: Inertia) -> Inertia:
-        return Inertia(self.A + other.A, self.B + other.B, self.C + other.C)
+        return Inertia(mat_add(self.A, other.A), mat_add(self.B, other.B),
+                       mat_add(self.C, other.C))
 
     def named(self, rec: Recorder) -> Inertia:
         """The 21 distinct entries named."""
-        return Inertia(_symmetric(self.A, rec), self.B.applyfunc(rec.name),
+        return Inertia(_symmetric(self.A, rec), rec.named_rows(self.B),
                        _symmetric(self.C, rec))
 
-    def times(self, w: Vec, v: Vec) -> tuple[Vec, Vec]:
+    def times(self, w: Vec3, v: Vec3) -> tuple[Vec3, Vec3]:
         """I (w, v): the force (moment, force) of a motion."""
-        return self.A * w + self.B * v, self.B.T * w + self.C * v
+        n, f = self.times_terms(w, v)
+        return n.vec(), f.vec()
+
+    def times_terms(self, w: Vec3, v: Vec3) -> tuple[Terms, Terms]:
+        """I (w, v) as terms."""
+        return (mat_vec_terms(self.A, w) + mat_vec_terms(self.B, v),
+                mat_T_vec_terms(self.B, w) + mat_vec_terms(self.C, v))
 
     def matrix(self) -> sp.Matrix:
         """The 6x6 matrix, angular rows and columns first."""
-        return sp.Matrix(sp.BlockMatrix([[self.A, self.B], [self.B.T, self.C]]))
+        return sp.Matrix([[*a, *b] for a, b in zip(self.A, self.B)]
+                         + [[*bt, *c] for bt, c in zip(transpose(self.B), self.C)])
 
 
 def _ldlt(A: sp.Matrix, rec: Recorder) -> tuple[sp.Matrix, list, list]:
@@ -190,7 +228,7 @@ def _program(model: Model, coords: CoordinateSymbols, rec: Recorder) -> AbaProgr
     links = _links(model, coords, rec)
     c, bias = _velocity_pass(links, coords, rec)
     U, D, Dinv, u = _articulated_pass(links, coords, rec, c, bias, model)
-    qdd = _acceleration_pass(links, coords, rec, c, U, Dinv, u, -sp.Matrix(model.gravity))
+    qdd = _acceleration_pass(links, coords, rec, c, U, Dinv, u, neg(as_vec(model.gravity)))
     pivots = [p for i, link in enumerate(links) if link.k is not None
               for p in (D[i] if link.free else [D[i]])]
     new = _needed(rec.definitions, qdd + pivots, first=given)
@@ -203,33 +241,34 @@ def _program(model: Model, coords: CoordinateSymbols, rec: Recorder) -> AbaProgr
 
 
 def _rigid_inertia(link: Link) -> Inertia:
-    return Inertia(link.I_O, _skew(link.h), link.mass * sp.eye(3))
+    return Inertia(link.I_O, skew(link.h), mat_scale(link.mass, IDENTITY))
 
 
-def _joint_motion(link: Link, rate) -> tuple[Vec, Vec]:
+def _joint_motion(link: Link, rate) -> tuple[Vec3, Vec3]:
     """s * rate as (angular, linear); zero for a fixed joint."""
     if link.k is None:
         return ZERO, ZERO
     if link.rotates:
-        return link.axis * rate, ZERO
-    return ZERO, link.axis * rate
+        return scale(rate, link.axis), ZERO
+    return ZERO, scale(rate, link.axis)
 
 
-def _project(link: Link, n: Vec, f: Vec) -> sp.Expr:
+def _project(link: Link, n: Vec3, f: Vec3) -> sp.Expr:
     """s^T (n, f): the component of a force along the joint's motion subspace."""
-    return link.axis.dot(n if link.rotates else f)
+    return dot(link.axis, n if link.rotates else f)
 
 
-def _motion_to_child(link: Link, w_p: Vec, v_p: Vec, rec: Recorder) -> tuple[Vec, Vec]:
+def _motion_to_child(link: Link, w_p: Vec3, v_p: Vec3, rec: Recorder) -> tuple[Vec3, Vec3]:
     """X (w_p, v_p): a parent-frame motion (or spatial acceleration) in this frame."""
-    return link.to_child(w_p, rec), link.to_child(v_p + w_p.cross(link.d), rec)
+    return (link.to_child(w_p, rec),
+            link.to_child((Terms.of(v_p) + cross_terms(w_p, link.d)).vec(), rec))
 
 
 def _velocity_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder):
     """Velocity-product accelerations c_i and bias forces p_i = v_i x* I_i v_i."""
-    v: list[tuple[Vec, Vec]] = []
-    c: list[tuple[Vec, Vec]] = []
-    bias: list[tuple[Vec, Vec]] = []
+    v: list[tuple[Vec3, Vec3]] = []
+    c: list[tuple[Vec3, Vec3]] = []
+    bias: list[tuple[Vec3, Vec3]] = []
     for link in links:
         if link.parent is None:
             w_in, v_in = ZERO, ZERO
@@ -240,13 +279,15 @@ def _velocity_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder):
             s_w, s_v = v_ang, v_lin
         else:
             s_w, s_v = _joint_motion(link, coords.qd[link.k] if link.k is not None else 0)
-        w, vel = rec.vec(w_in + s_w), rec.vec(v_in + s_v)
+        w, vel = rec.named(add(w_in, s_w)), rec.named(add(v_in, s_v))
         # v_i x (s qd) = (w x s_w, w x s_v + v x s_w); s x s = 0 lets w_in stand for w
-        c.append((rec.vec(w_in.cross(s_w)), rec.vec(w_in.cross(s_v) + v_in.cross(s_w))))
+        c.append((rec.named(cross(w_in, s_w)),
+                  rec.named((cross_terms(w_in, s_v) + cross_terms(v_in, s_w)).vec())))
         v.append((w, vel))
         L, P = _rigid_inertia(link).times(w, vel)
-        L, P = rec.vec(L), rec.vec(P)
-        bias.append((rec.vec(w.cross(L) + vel.cross(P)), rec.vec(w.cross(P))))
+        L, P = rec.named(L), rec.named(P)
+        bias.append((rec.named((cross_terms(w, L) + cross_terms(vel, P)).vec()),
+                     rec.named(cross(w, P))))
     return c, bias
 
 
@@ -269,7 +310,7 @@ def _articulated_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorde
     for i in reversed(range(len(links))):
         link = links[i]
         IA[i] = IA[i].named(rec)
-        n_i, f_i = rec.vec(pA[i][0]), rec.vec(pA[i][1])
+        n_i, f_i = rec.named(pA[i][0]), rec.named(pA[i][1])
         Ia = IA[i]
         if link.free:  # a floating root: its 6x6 articulated inertia, factorised
             L, D[i], Dinv[i] = _ldlt(IA[i].matrix(), rec)
@@ -277,32 +318,33 @@ def _articulated_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorde
             continue
         if link.k is not None:
             U_n, U_f = IA[i].times(*_joint_motion(link, 1))
-            U_n, U_f = rec.vec(U_n), rec.vec(U_f)
+            U_n, U_f = rec.named(U_n), rec.named(U_f)
             D[i] = rec.name(_project(link, U_n, U_f) + armature[link.k])
             Dinv[i] = rec.name(1 / D[i])
             u[i] = rec.name(force[link.k] - _project(link, n_i, f_i))
             U[i] = (U_n, U_f)
             if link.parent is None:
                 continue
-            W_n, W_f = rec.vec(U_n * Dinv[i]), rec.vec(U_f * Dinv[i])  # U / D
+            W_n, W_f = rec.named(scale(Dinv[i], U_n)), rec.named(scale(Dinv[i], U_f))  # U / D
             exact = armature[link.k].is_zero is True  # else s^T U != D: no exact shortcuts
             if exact:
-                _exact_gain(link, W_n, W_f)
-            Ia = Inertia(IA[i].A - W_n * U_n.T, IA[i].B - W_n * U_f.T, IA[i].C - W_f * U_f.T)
-            n_a, f_a = n_i + W_n * u[i], f_i + W_f * u[i]
+                W_n, W_f = _exact_gain(link, W_n, W_f)
+            Ia = Inertia(mat_sub(IA[i].A, outer(W_n, U_n)), mat_sub(IA[i].B, outer(W_n, U_f)),
+                         mat_sub(IA[i].C, outer(W_f, U_f)))
+            n_a, f_a = add(n_i, scale(u[i], W_n)), add(f_i, scale(u[i], W_f))
             if exact:
-                _exact_articulated(link, force[link.k], Ia, n_a, f_a)
+                Ia, n_a, f_a = _exact_articulated(link, force[link.k], Ia, n_a, f_a)
             Ia = Ia.named(rec)
-            In, If = Ia.times(*c[i])
-            n_i, f_i = rec.vec(n_a + In), rec.vec(f_a + If)
+            In, If = Ia.times_terms(*c[i])
+            n_i, f_i = rec.named((Terms.of(n_a) + In).vec()), rec.named((Terms.of(f_a) + If).vec())
         if link.parent is None:
             continue
         up = _inertia_to_parent(link, Ia, rec)
         IA[link.parent] = IA[link.parent] + up
         f_up = link.to_parent(f_i, rec)
-        n_up = rec.vec(link.R * n_i + link.d.cross(f_up))
-        pA[link.parent][0] = pA[link.parent][0] + n_up
-        pA[link.parent][1] = pA[link.parent][1] + f_up
+        n_up = rec.named((mat_vec_terms(link.R, n_i) + cross_terms(link.d, f_up)).vec())
+        pA[link.parent][0] = add(pA[link.parent][0], n_up)
+        pA[link.parent][1] = add(pA[link.parent][1], f_up)
     return U, D, Dinv, u
 
 
@@ -315,17 +357,22 @@ def _coordinate_axis(link: Link) -> tuple[int, int] | None:
     return None
 
 
-def _exact_gain(link: Link, W_n: Vec, W_f: Vec) -> None:
-    """For an axis sign * e_j: s^T W = s^T U / D = 1, so W's component j is sign exactly
-    (in place), not the operation D * (1/D)."""
+def _exact_gain(link: Link, W_n: Vec3, W_f: Vec3) -> tuple[Vec3, Vec3]:
+    """For an axis sign * e_j: s^T W = s^T U / D = 1, so W's component j is sign exactly,
+    not the operation D * (1/D). Returns (W_n, W_f) with it put in."""
     found = _coordinate_axis(link)
-    if found is not None:
-        j, sign = found
-        (W_n if link.rotates else W_f)[j] = sign
+    if found is None:
+        return W_n, W_f
+    j, sign = found
+    if link.rotates:
+        return _with_entry(W_n, j, sp.Integer(sign)), W_f
+    return W_n, _with_entry(W_f, j, sp.Integer(sign))
 
 
-def _exact_articulated(link: Link, tau, Ia: Inertia, n_a: Vec, f_a: Vec) -> None:
-    """For an axis sign * e_j, the exact zeros and torque of I^a and p^a (in place).
+def _exact_articulated(link: Link, tau, Ia: Inertia, n_a: Vec3, f_a: Vec3
+                       ) -> tuple[Inertia, Vec3, Vec3]:
+    """For an axis sign * e_j, the exact zeros and torque of I^a and p^a: (I^a, n^a, f^a)
+    with them put in.
 
     I^a s = I^A s - U (s^T U) / D = 0, so I^a's row and column along the axis vanish; and
     s^T p^a = s^T p^A + u = tau makes p^a's component j sign * tau (tau: the joint force
@@ -333,57 +380,75 @@ def _exact_articulated(link: Link, tau, Ia: Inertia, n_a: Vec, f_a: Vec) -> None
     time. Both need D = s^T U, i.e. no armature."""
     found = _coordinate_axis(link)
     if found is None:
-        return
+        return Ia, n_a, f_a
     j, sign = found
-    if link.rotates:
-        n_a[j] = sign * tau
-        Ia.A[j, :] = sp.zeros(1, 3)
-        Ia.A[:, j] = sp.zeros(3, 1)
-        Ia.B[j, :] = sp.zeros(1, 3)
-    else:
-        f_a[j] = sign * tau
-        Ia.C[j, :] = sp.zeros(1, 3)
-        Ia.C[:, j] = sp.zeros(3, 1)
-        Ia.B[:, j] = sp.zeros(3, 1)
+    if link.rotates:  # the angular row and column j: A's, and B's row j
+        Ia = Inertia(_without_row_and_column(Ia.A, j), _without_row(Ia.B, j), Ia.C)
+        return Ia, _with_entry(n_a, j, sign * tau), f_a
+    # the linear row and column j: C's, and B's column j
+    Ia = Inertia(Ia.A, _without_column(Ia.B, j), _without_row_and_column(Ia.C, j))
+    return Ia, n_a, _with_entry(f_a, j, sign * tau)
+
+
+def _with_entry(v: Vec3, j: int, value: sp.Expr) -> Vec3:
+    """v with its entry j replaced by value."""
+    return tuple(value if i == j else e for i, e in enumerate(v))
+
+
+def _without_row(A: Mat3, j: int) -> Mat3:
+    """A with its row j exact zeros."""
+    return tuple(ZERO if r == j else row for r, row in enumerate(A))
+
+
+def _without_column(A: Mat3, j: int) -> Mat3:
+    """A with its column j exact zeros."""
+    return tuple(_with_entry(row, j, sp.S.Zero) for row in A)
+
+
+def _without_row_and_column(A: Mat3, j: int) -> Mat3:
+    return _without_column(_without_row(A, j), j)
 
 
 def _inertia_to_parent(link: Link, I: Inertia, rec: Recorder) -> Inertia:
     """X^T I X: rotate the blocks into the parent's axes, then shift to O_parent."""
     R = link.R
-    A_r = _symmetric((R * I.A).applyfunc(rec.name) * R.T, rec)
-    B_r = ((R * I.B).applyfunc(rec.name) * R.T).applyfunc(rec.name)
-    C_r = _symmetric((R * I.C).applyfunc(rec.name) * R.T, rec)
-    d = _skew(link.d)
-    K = (B_r * d).applyfunc(rec.name)
-    Q = (d * C_r).applyfunc(rec.name)
-    A = _symmetric(A_r - K - K.T - Q * d, rec)
-    return Inertia(A, (B_r + Q).applyfunc(rec.name), C_r)
+    A_r = _rotate_inertia(R, I.A, rec)
+    B_r = rec.named_rows(mat_mat_T(rec.named_rows(mat_mat(R, I.B)), R))
+    C_r = _rotate_inertia(R, I.C, rec)
+    d = skew(link.d)
+    K = rec.named_rows(mat_mat(B_r, d))
+    Q = rec.named_rows(mat_mat(d, C_r))
+    # A_r - K - K^T - Q [d], only its upper triangle
+    A = _named_symmetric(lambda r, c: A_r[r][c] - K[r][c] - K[c][r]
+                         - sum_of_products((Q[r][k], d[k][c]) for k in range(3)), rec)
+    return Inertia(A, rec.named_rows(mat_add(B_r, Q)), C_r)
 
 
 def _acceleration_pass(links: list[Link], coords: CoordinateSymbols, rec: Recorder, c: list,
-                       U: list, Dinv: list, u: list, base: Vec) -> list[sp.Expr]:
+                       U: list, Dinv: list, u: list, base: Vec3) -> list[sp.Expr]:
     """Spatial accelerations root to leaves, with each joint's qdd on the way."""
-    acc: list[tuple[Vec, Vec]] = []
+    acc: list[tuple[Vec3, Vec3]] = []
     qdd: list[sp.Expr] = [sp.Integer(0)] * len(coords.qd)
     for i, link in enumerate(links):
         if link.parent is None:
             alpha, a = ZERO, link.to_child(base, rec)
         else:
             alpha, a = _motion_to_child(link, *acc[link.parent], rec)
-        alpha, a = rec.vec(alpha + c[i][0]), rec.vec(a + c[i][1])
+        alpha, a = rec.named(add(alpha, c[i][0])), rec.named(add(a, c[i][1]))
         if link.free:
             # I^A (a' + x) + p^A = tau: the joint's acceleration x = (dw/dt, dv/dt) of the
             # body-frame components, Pinocchio's FreeFlyer acceleration
             (IA, L), (n_A, f_A) = U[i], u[i]
             tau_f, tau_n = free_velocities(link, coords.tau)
             In, If = IA.times(alpha, a)
-            x = _ldlt_solve(L, Dinv[i], [*(tau_n - n_A - In), *(tau_f - f_A - If)], rec)
+            x = _ldlt_solve(L, Dinv[i], [*sub(sub(tau_n, n_A), In), *sub(sub(tau_f, f_A), If)],
+                            rec)
             qdd[link.k: link.k + 6] = [*x[3:], *x[:3]]
-            alpha, a = rec.vec(alpha + sp.Matrix(x[:3])), rec.vec(a + sp.Matrix(x[3:]))
+            alpha, a = rec.named(add(alpha, x[:3])), rec.named(add(a, x[3:]))
         elif link.k is not None:
             U_n, U_f = U[i]
-            qdd[link.k] = rec.name(Dinv[i] * (u[i] - U_n.dot(alpha) - U_f.dot(a)))
+            qdd[link.k] = rec.name(Dinv[i] * (u[i] - dot(U_n, alpha) - dot(U_f, a)))
             s_w, s_v = _joint_motion(link, qdd[link.k])
-            alpha, a = rec.vec(alpha + s_w), rec.vec(a + s_v)
+            alpha, a = rec.named(add(alpha, s_w)), rec.named(add(a, s_v))
         acc.append((alpha, a))
     return qdd

@@ -219,7 +219,7 @@ def tangent_map(model, q: list[sp.Symbol], rec: Recorder) -> list[list[tuple[int
         quaternion = q[iq + 3: iq + 7]
         R = quaternion_rotation(quaternion, rec)
         for k in range(3):
-            columns[iv + k] = [(iq + r, R[r, k]) for r in range(3)]
+            columns[iv + k] = [(iq + r, R[r][k]) for r in range(3)]
         x, y, z, s = quaternion
         half = sp.Rational(1, 2)
         for k, rates in enumerate(((s, z, -y, -x), (-z, s, x, -y), (y, -x, s, -z))):

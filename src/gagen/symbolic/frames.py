@@ -29,6 +29,7 @@ from ..model.model import WORLD
 from .differentiate import recorder_after
 from .gibbs_appell import Equations
 from .kinematics import joint_transform, unit_axis
+from .vec3 import IDENTITY, ZERO, Mat3, Vec3, add, mat_mat, mat_vec
 
 PLACEMENT_SIZE = 15  # R (9), p (3), the joint's axis in the world (3)
 OFFSET_SIZE = 12  # R (9), p (3)
@@ -39,20 +40,22 @@ def add_frame_kinematics(eqs: Equations) -> Equations:
     model = eqs.model
     rec = recorder_after(eqs.intermediates)
     index = model.indices()
-    world = (sp.eye(3), sp.zeros(3, 1))
-    placed: dict[str, tuple[sp.Matrix, sp.Matrix]] = {WORLD: world}
+    placed: dict[str, tuple[Mat3, Vec3]] = {WORLD: (IDENTITY, ZERO)}
     placements: list[sp.Expr] = []
     for body in model.bodies:
         joint = body.joint
         iq = index.get(body.name, (0, 0))[0]
         R_j, d_j = joint_transform(joint, eqs.coords.q[iq: iq + joint.nq], rec)
+        # named as the derivation named them (the same names): each entry is read by
+        # three products below, and a sum would be written out in each
+        R_j, d_j = rec.named_rows(R_j), rec.named(d_j)
         R_p, p_p = placed[body.parent]
-        R = (R_p * R_j).applyfunc(rec.name)
-        p = rec.vec(p_p + R_p * d_j)
-        axis = rec.vec(R * unit_axis(joint.axis)) if joint.moves and not joint.floating \
-            else sp.zeros(3, 1)
+        R = rec.named_rows(mat_mat(R_p, R_j))
+        p = rec.named(add(p_p, mat_vec(R_p, d_j)))
+        axis = rec.named(mat_vec(R, unit_axis(joint.axis))) \
+            if joint.moves and not joint.floating else ZERO
         placed[body.name] = (R, p)
-        placements += [*R, *p, *axis]
+        placements += [*(e for row in R for e in row), *p, *axis]
     offsets: list[sp.Expr] = []
     for frame in model.frames:
         offsets += [*sp.Matrix(frame.rotation), *sp.Matrix(frame.xyz)]

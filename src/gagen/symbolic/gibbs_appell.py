@@ -211,11 +211,11 @@ def joint_torque_forces(model: Model, kinematics: list[BodyKinematics],
             for r in range(n):
                 Q[r] += child.Jv.get(r, zero).dot(force) + child.Jw.get(r, zero).dot(moment)
             continue
-        axis = unit_axis(body.joint.axis)
+        axis = sp.Matrix(unit_axis(body.joint.axis))
         R = sp.Matrix(body.joint.origin_rotation)
         d = sp.Matrix(body.joint.origin_xyz)
         if body.joint.rotates:
-            R = R * axis_rotation(axis, sp.cos(coords.q[iq]), sp.sin(coords.q[iq]))
+            R = R * sp.Matrix(axis_rotation(axis, sp.cos(coords.q[iq]), sp.sin(coords.q[iq])))
         else:
             d = d + R * axis * coords.q[iq]
         action = axis * coords.tau[k]          # in the child's frame

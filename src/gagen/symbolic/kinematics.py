@@ -14,14 +14,33 @@ partial velocities of eqs. 7-10; alpha0 and aC0 are the parts of eq. 4 free of q
 
 from __future__ import annotations
 
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import sympy as sp
 
 from ..model.model import Body, Model
 from .symbols import Acceleration, Coordinate, Internal, Rate, Torque
+from .vec3 import (
+    IDENTITY,
+    Mat3,
+    Vec3,
+    add,
+    as_mat,
+    as_vec,
+    expanded,
+    mat_mat,
+    mat_T_vec,
+    mat_vec,
+    product,
+    scale,
+    skew,
+    total,
+)
 
 Vec = sp.Matrix
+T = TypeVar("T")
 
 
 class Recorder:
@@ -32,6 +51,7 @@ class Recorder:
         self.definitions: list[tuple[Internal, sp.Expr]] = []
         self._by_expr: dict[sp.Expr, Internal] = {}
         self.next_index = 0  # the number of the next name (names are never reused)
+        self._cache: dict[Hashable, object] = {}
 
     def name(self, expr) -> sp.Expr:
         expr = sp.sympify(expr)
@@ -47,6 +67,26 @@ class Recorder:
 
     def vec(self, v) -> Vec:
         return Vec([self.name(e) for e in v])
+
+    def named(self, v) -> tuple[sp.Expr, ...]:
+        """Each entry of a vector named, as a tuple (`vec3`'s vectors)."""
+        return tuple(self.name(e) for e in v)
+
+    def named_rows(self, A) -> Mat3:
+        """Each entry of a 3x3 matrix (rows) named."""
+        return tuple(self.named(row) for row in A)
+
+    def cached(self, key: Hashable, compute: Callable[[], T]) -> T:
+        """compute(), once per key in this program; later calls return the first result.
+
+        For results that are a function of the key alone (an operation's name and its
+        operands, which are named expressions of this program): the recursive passes
+        rotate the same vectors and take the same products several times, and building
+        them again in SymPy, only to find their names already defined, is most of what a
+        repeated step costs."""
+        if key not in self._cache:
+            self._cache[key] = compute()
+        return self._cache[key]
 
 
 def _is_trivial(expr: sp.Expr) -> bool:
@@ -110,43 +150,50 @@ def _linear_form(columns: dict[int, Vec], rates: list[sp.Symbol], constant: Vec)
     return out
 
 
-def unit_axis(axis) -> Vec:
-    axis = sp.Matrix(axis)
+def unit_axis(axis) -> Vec3:
+    """The joint axis divided by its length (a float for a numeric axis)."""
+    axis = as_vec(axis)
     norm2 = sp.expand(sum(a * a for a in axis))
     if norm2 == 1:
         return axis
     if norm2.is_Number:
-        return axis / sp.Float(float(sp.sqrt(norm2)))
-    return axis / sp.sqrt(norm2)
+        return scale(1 / sp.Float(float(sp.sqrt(norm2))), axis)
+    return scale(1 / sp.sqrt(norm2), axis)
 
 
-def axis_rotation(axis: Vec, c: sp.Expr, s: sp.Expr) -> sp.Matrix:
-    """Rodrigues' rotation about a unit axis, given cos and sin of the angle."""
-    ax, ay, az = axis
-    K = sp.Matrix([[0, -az, ay], [az, 0, -ax], [-ay, ax, 0]])
-    R = c * sp.eye(3) + s * K + (1 - c) * (axis * axis.T)
-    return R.applyfunc(sp.expand)
+def axis_rotation(axis: Vec3, c: sp.Expr, s: sp.Expr) -> Mat3:
+    """Rodrigues' rotation about a unit axis, given cos and sin of the angle:
+    c E + s [axis] + (1 - c) axis axis^T, each entry expanded."""
+    K = skew(axis)
+    return tuple(tuple(expanded(total((product(c, IDENTITY[r][k]), product(s, K[r][k]),
+                                       product(1 - c, product(axis[r], axis[k])))))
+                       for k in range(3)) for r in range(3))
 
 
-def joint_transform(joint, q: list, rec: Recorder) -> tuple[sp.Matrix, Vec]:
+def joint_transform(joint, q: list, rec: Recorder) -> tuple[Mat3, Vec3]:
     """The parent-frame components of the child's axes, R, and the child's origin in the
     parent's frame, d, at the joint's configuration entries `q` (none for a fixed joint,
     one for a 1-dof joint, 7 for a floating one: position and quaternion x, y, z, w)."""
-    R = sp.Matrix(joint.origin_rotation)
-    d = sp.Matrix(joint.origin_xyz)
+    R = as_mat(joint.origin_rotation)
+    d = as_vec(joint.origin_xyz)
     if joint.floating:  # the joint's origin, then the free motion (Pinocchio's order)
-        return ((R * quaternion_rotation(q[3:7], rec)).applyfunc(sp.expand),
-                d + R * sp.Matrix(q[:3]))
+        return (_expanded(mat_mat(R, quaternion_rotation(q[3:7], rec))),
+                add(d, mat_vec(R, as_vec(q[:3]))))
     if joint.rotates:
         axis = unit_axis(joint.axis)
         c, s = rec.name(sp.cos(q[0])), rec.name(sp.sin(q[0]))
-        R = (R * axis_rotation(axis, c, s)).applyfunc(sp.expand)
+        R = _expanded(mat_mat(R, axis_rotation(axis, c, s)))
     elif joint.type == "prismatic":
-        d = d + R * unit_axis(joint.axis) * q[0]
+        d = add(d, scale(q[0], mat_vec(R, unit_axis(joint.axis))))
     return R, d
 
 
-def quaternion_rotation(quaternion, rec: Recorder) -> sp.Matrix:
+def _expanded(A: Mat3) -> Mat3:
+    """Each entry expanded: a product of rotations as sums of products, as before."""
+    return tuple(tuple(expanded(e) for e in row) for row in A)
+
+
+def quaternion_rotation(quaternion, rec: Recorder) -> Mat3:
     """The rotation of a quaternion (x, y, z, w), each entry named. Divided by its squared
     norm, so that any non-zero quaternion gives a rotation (an integrator's drift off the
     unit sphere changes nothing), and a unit one gives Eigen's / Pinocchio's matrix."""
@@ -156,7 +203,7 @@ def quaternion_rotation(quaternion, rec: Recorder) -> sp.Matrix:
     entries = [[1 - (y * ys + z * zs), x * ys - w * zs, x * zs + w * ys],
                [x * ys + w * zs, 1 - (x * xs + z * zs), y * zs - w * xs],
                [x * zs - w * ys, y * zs + w * xs, 1 - (x * xs + y * ys)]]
-    return sp.Matrix(entries).applyfunc(rec.name)
+    return rec.named_rows(entries)
 
 
 def derive_kinematics(model: Model, coords: CoordinateSymbols, rec: Recorder) -> list[BodyKinematics]:
@@ -177,11 +224,10 @@ def _child_kinematics(body: Body, parent: BodyKinematics, start: tuple[int, int]
     joint = body.joint
     iq, iv = start if start is not None else (0, 0)
     R, d = joint_transform(joint, coords.q[iq: iq + joint.nq], rec)
-    axis = unit_axis(joint.axis)
-    RT = R.T
+    d, axis = Vec(d), Vec(unit_axis(joint.axis))
 
     def to_child(v: Vec) -> Vec:
-        return rec.vec(RT * v)
+        return Vec(rec.named(mat_T_vec(R, v)))
 
     kin = BodyKinematics(body=body)
     for r, jw in parent.Jw.items():

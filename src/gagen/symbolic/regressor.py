@@ -42,6 +42,7 @@ from .differentiate import needed_definitions, recorder_after
 from .joints import jointed
 from .kinematics import CoordinateSymbols, Recorder
 from .recursive import _angular_velocities, _cross_square, _links, accelerations
+from .vec3 import ZERO, Vec3, add, as_vec, cross, dot, unit
 
 # (row, column) of I_O for the last six of a body's ten parameters (Pinocchio's order)
 _INERTIA_ENTRIES = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))
@@ -69,7 +70,7 @@ def derive_regressor(model: Model, coords: CoordinateSymbols | None = None,
     pieces = mass_pieces(model)
     links = _bare_links(model, coords, rec)
     w = _angular_velocities(links, coords, rec)
-    alpha, acc = accelerations(links, coords, rec, w, coords.qdd, sp.Matrix(model.gravity))
+    alpha, acc = accelerations(links, coords, rec, w, coords.qdd, as_vec(model.gravity))
     rigid = sp.zeros(model.dof, 10 * len(links))
     children: list[list[int]] = [[] for _ in links]
     for k, link in enumerate(links):
@@ -85,7 +86,7 @@ def derive_regressor(model: Model, coords: CoordinateSymbols | None = None,
                 for child in children[k]:
                     c = links[child]
                     stack.append((child, (c.to_child(ang, rec),
-                                          c.to_child(lin + ang.cross(c.d), rec))))
+                                          c.to_child(add(lin, cross(ang, c.d)), rec))))
     Y = rigid.row_join(_joint_columns(model, coords))
     new = needed_definitions(rec.definitions, list(Y), first=given)
     pi = regressor_parameters(model)
@@ -128,10 +129,11 @@ def regressor_kinematics(eqs) -> RegressorKinematics:
     given = len(rec.definitions)
     links = _bare_links(model, coords, rec)
     w = _angular_velocities(links, coords, rec)
-    alpha, acc = accelerations(links, coords, rec, w, coords.qdd, sp.Matrix(model.gravity))
+    alpha, acc = accelerations(links, coords, rec, w, coords.qdd, as_vec(model.gravity))
     values = []
     for k, link in enumerate(links):
-        values += [*link.R, *link.d, *w[k], *alpha[k], *acc[k], *link.axis]
+        R = [e for row in link.R for e in row]  # row-major
+        values += [*R, *link.d, *w[k], *alpha[k], *acc[k], *link.axis]
     kinds = [NO_JOINT if link.k is None else FLOATING if link.free
              else REVOLUTE if link.rotates else PRISMATIC for link in links]
     new = needed_definitions(rec.definitions, values, first=given)
@@ -180,34 +182,33 @@ def _bare_links(model: Model, coords: CoordinateSymbols, rec: Recorder):
     return _links(bare, coords, rec)
 
 
-def _joint_axes(link) -> list[tuple[int, tuple[sp.Matrix, sp.Matrix]]]:
+def _joint_axes(link) -> list[tuple[int, tuple[Vec3, Vec3]]]:
     """(row, (sigma_ang, sigma_lin)) per velocity coordinate of a link's joint, in its
     frame: the joint's torque is sigma_ang . N + sigma_lin . F of the wrench (F, N) about
     its origin. A floating joint's six rows are the wrench's components."""
     if link.k is None:
         return []
-    E, zero = sp.eye(3), sp.zeros(3, 1)
     if link.free:
-        return [(link.k + r, (zero, E[:, r])) for r in range(3)] + \
-            [(link.k + 3 + r, (E[:, r], zero)) for r in range(3)]
+        return [(link.k + r, (ZERO, unit(r))) for r in range(3)] + \
+            [(link.k + 3 + r, (unit(r), ZERO)) for r in range(3)]
     if link.rotates:
-        return [(link.k, (link.axis, zero))]
-    return [(link.k, (zero, link.axis))]
+        return [(link.k, (link.axis, ZERO))]
+    return [(link.k, (ZERO, link.axis))]
 
 
-def _body_columns(ang: sp.Matrix, lin: sp.Matrix, w: sp.Matrix, alpha: sp.Matrix,
-                  a: sp.Matrix, rec: Recorder) -> list[sp.Expr]:
+def _body_columns(ang: Vec3, lin: Vec3, w: Vec3, alpha: Vec3, a: Vec3,
+                  rec: Recorder) -> list[sp.Expr]:
     """The ten coefficients of (m, h, I_O) in ang . n + lin . f, the body's wrench (f, n)
     about its origin (module docstring), each named."""
-    h = rec.vec(lin.cross(alpha) + w.cross(rec.vec(w.cross(lin))) + a.cross(ang))
-    b = rec.vec(ang.cross(w))
+    h = rec.named(add(cross(lin, alpha), cross(w, rec.named(cross(w, lin))), cross(a, ang)))
+    b = rec.named(cross(ang, w))
     inertia = []
     for r, c in _INERTIA_ENTRIES:
         if r == c:
             inertia.append(ang[r] * alpha[r] + b[r] * w[r])
         else:
             inertia.append(ang[r] * alpha[c] + ang[c] * alpha[r] + b[r] * w[c] + b[c] * w[r])
-    return [rec.name(e) for e in [lin.dot(a), *h, *inertia]]
+    return [rec.name(e) for e in [dot(lin, a), *h, *inertia]]
 
 
 def _joint_columns(model: Model, coords: CoordinateSymbols) -> sp.Matrix:
@@ -231,7 +232,7 @@ def body_parameters(parts) -> list[sp.Expr]:
         c = sp.Matrix(com)
         m += mass
         h += mass * c
-        I_O += sp.Matrix(inertia) + mass * _cross_square(c)
+        I_O += sp.Matrix(inertia) + mass * sp.Matrix(_cross_square(c))
     return [m, *h, *(I_O[r, c] for r, c in _INERTIA_ENTRIES)]
 
 

@@ -56,7 +56,9 @@ import sympy as sp
 
 from ..model.model import Model
 from .kinematics import CoordinateSymbols, Recorder
-from .recursive import Link, _links, _skew, _symmetric
+from .recursive import Link, _links
+from .recursive import _symmetric as _symmetric3
+from .vec3 import as_mat, skew
 
 Vec = sp.Matrix
 Motion = tuple[Vec, Vec]   # (angular, linear at the origin)
@@ -164,11 +166,12 @@ def _world_kinematics(links: list[Link], coords: CoordinateSymbols, gravity,
     p0: list[Vec] = []
     for link in links:
         if link.parent is None:
-            R, p, v_in, a0_in, alpha_in, a_in = link.R, link.d, rest, base, rest, base
+            R, p, v_in, a0_in, alpha_in, a_in = (sp.Matrix(link.R), sp.Matrix(link.d), rest,
+                                                 base, rest, base)
         else:
             P = link.parent
-            R = (R0[P] * link.R).applyfunc(rec.name)
-            p = rec.vec(p0[P] + R0[P] * link.d)
+            R = (R0[P] * sp.Matrix(link.R)).applyfunc(rec.name)
+            p = rec.vec(p0[P] + R0[P] * sp.Matrix(link.d))
             v_in, a0_in, alpha_in, a_in = out.v[P], out.a0[P], out.alpha[P], out.a[P]
         R0.append(R)
         p0.append(p)
@@ -182,7 +185,7 @@ def _world_kinematics(links: list[Link], coords: CoordinateSymbols, gravity,
             out.alpha.append(alpha_in)
             out.a.append(a_in)
             continue
-        z = rec.vec(R * link.axis)
+        z = rec.vec(R * sp.Matrix(link.axis))
         S = (z, rec.vec(p.cross(z))) if link.rotates else (ZERO, z)
         dV = _mcross(v_in, S, rec)
         dA = _add(_mcross(a_in, S, rec), _mcross(v_in, dV, rec))
@@ -204,8 +207,8 @@ def _world_inertia(link: Link, R: sp.Matrix, p: Vec, rec: Recorder) -> Inertia:
     (at p, axes R): rotated, then moved by the parallel-axes terms. With h the rotated
     first moment about the frame's origin, those are m (|p|^2 E - p p^T) + 2 (p.h) E -
     (p h^T + h p^T) = 2 (p.g) E - (p g^T + g p^T) with g = h + m p / 2."""
-    h = rec.vec(R * link.h)
-    RI = (R * link.I_O).applyfunc(rec.name)
+    h = rec.vec(R * sp.Matrix(link.h))
+    RI = (R * sp.Matrix(link.I_O)).applyfunc(rec.name)
     g = rec.vec(h + link.mass / 2 * p)
     pg = rec.name(p.dot(g))
     I = RI * R.T + 2 * pg * sp.eye(3) - (p * g.T + g * p.T)
@@ -255,7 +258,7 @@ def _inertia_rate(I: Inertia, x: Motion, rec: Recorder) -> Inertia:
     w, v = x
     c_rate = rec.vec(I.m * v + w.cross(I.c))
     cv = rec.name(I.c.dot(v))
-    Wx = _skew(w)
+    Wx = sp.Matrix(skew(w))
     I_rate = 2 * cv * sp.eye(3) - (v * I.c.T + I.c * v.T) + Wx * I.I - I.I * Wx
     return Inertia(sp.Integer(0), c_rate, _symmetric(I_rate, rec))
 
@@ -306,3 +309,8 @@ def _named(x, rec: Recorder):
 
 def _named_inertia(I: Inertia, rec: Recorder) -> Inertia:
     return Inertia(rec.name(I.m), rec.vec(I.c), _symmetric(I.I, rec))
+
+
+def _symmetric(A: sp.Matrix, rec: Recorder) -> sp.Matrix:
+    """`recursive._symmetric` (the 6 distinct entries named) of a sympy.Matrix."""
+    return sp.Matrix(_symmetric3(as_mat(A), rec))
