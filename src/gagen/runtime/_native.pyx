@@ -291,54 +291,33 @@ cdef class _Evaluator:
 
 # --- the model's kernels ------------------------------------------------------------------
 
-ctypedef int (*kernel3)(const gagen_model_api *, const double *, const double *,
-                        const double *, const double *, double *) noexcept nogil
+# the model's kernels of (up to) three state arrays, called by _run
+cdef enum Kernel:
+    MASS_MATRIX, FORCING, FORWARD_DYNAMICS, INVERSE_DYNAMICS, ENERGY, GRAVITY, PLACEMENTS, \
+        REGRESSOR
 
 
-cdef int _forcing(const gagen_model_api *api, const double *a, const double *b,
-                  const double *c, const double *p, double *out) noexcept nogil:
-    api.forcing(a, b, c, p, out)
-    return 0
-
-
-cdef int _inverse(const gagen_model_api *api, const double *a, const double *b,
-                  const double *c, const double *p, double *out) noexcept nogil:
-    api.inverse_dynamics(a, b, c, p, out)
-    return 0
-
-
-cdef int _forward(const gagen_model_api *api, const double *a, const double *b,
-                  const double *c, const double *p, double *out) noexcept nogil:
-    return api.forward_dynamics(a, b, c, p, out)
-
-
-cdef int _energy(const gagen_model_api *api, const double *a, const double *b,
-                 const double *c, const double *p, double *out) noexcept nogil:
-    api.energy(a, b, p, out)
-    return 0
-
-
-cdef int _gravity(const gagen_model_api *api, const double *a, const double *b,
-                  const double *c, const double *p, double *out) noexcept nogil:
-    api.gravity(a, p, out)
-    return 0
-
-
-cdef int _mass(const gagen_model_api *api, const double *a, const double *b,
-               const double *c, const double *p, double *out) noexcept nogil:
-    api.mass_matrix(a, p, out)
-    return 0
-
-
-cdef int _placements(const gagen_model_api *api, const double *a, const double *b,
-                     const double *c, const double *p, double *out) noexcept nogil:
-    api.placements(a, p, out)
-    return 0
-
-
-cdef int _regressor(const gagen_model_api *api, const double *a, const double *b,
-                    const double *c, const double *p, double *out) noexcept nogil:
-    api.regressor(a, b, c, p, out)
+cdef inline int _call(const gagen_model_api *api, Kernel kernel, const double *a,
+                      const double *b, const double *c, const double *p,
+                      double *out) noexcept nogil:
+    """One kernel at one state: a (q), b and c (rates) as the kernel reads them; its status
+    (only forward dynamics can fail)."""
+    if kernel == FORWARD_DYNAMICS:
+        return api.forward_dynamics(a, b, c, p, out)
+    if kernel == MASS_MATRIX:
+        api.mass_matrix(a, p, out)
+    elif kernel == INVERSE_DYNAMICS:
+        api.inverse_dynamics(a, b, c, p, out)
+    elif kernel == FORCING:
+        api.forcing(a, b, c, p, out)
+    elif kernel == GRAVITY:
+        api.gravity(a, p, out)
+    elif kernel == ENERGY:
+        api.energy(a, b, p, out)
+    elif kernel == PLACEMENTS:
+        api.placements(a, p, out)
+    else:
+        api.regressor(a, b, c, p, out)
     return 0
 
 
@@ -357,7 +336,7 @@ cdef class CompiledModel(_Evaluator):
         self.parameter_vector = parameter_vector
         self.external_forces = external_forces
 
-    cdef object _run(self, kernel3 kernel, Py_ssize_t nout, object x, object y, object z,
+    cdef object _run(self, Kernel kernel, Py_ssize_t nout, object x, object y, object z,
                      object p, str nx, str ny, str nz):
         """Evaluate a kernel at one state or at stacked states (one C loop, GIL released)."""
         cdef const gagen_model_api *api = self.api
@@ -377,7 +356,7 @@ cdef class CompiledModel(_Evaluator):
         if rows < 0:
             dims[0] = nout
             out = cnp.PyArray_EMPTY(1, dims, cnp.NPY_DOUBLE, 0)
-            status = kernel(api, _data(a), _data(b), _data(c), pp, _data(out))
+            status = _call(api, kernel, _data(a), _data(b), _data(c), pp, _data(out))
             if status:
                 self._failed(-1, status)
             return out
@@ -399,10 +378,11 @@ cdef class CompiledModel(_Evaluator):
         with nogil:
             for i in range(rows):
                 if scratch == NULL:
-                    code = kernel(api, pa_ + i * sa, pb + i * sb, pc + i * sc, pp,
-                                  po + i * nout)
+                    code = _call(api, kernel, pa_ + i * sa, pb + i * sb, pc + i * sc, pp,
+                                 po + i * nout)
                 else:
-                    code = kernel(api, pa_ + i * sa, pb + i * sb, pc + i * sc, pp, scratch)
+                    code = _call(api, kernel, pa_ + i * sa, pb + i * sb, pc + i * sc, pp,
+                                 scratch)
                     gagen_stream_copy(po + i * nout, scratch, nout)
                 if code != 0 and failed < 0:
                     failed = i
@@ -417,31 +397,31 @@ cdef class CompiledModel(_Evaluator):
     def mass_matrix(self, q, p=None):
         """M(q), shape (n, n), or (N, n, n) for stacked q."""
         cdef int nv = self.api.nv
-        out = self._run(_mass, nv * nv, q, None, None, p, "q", None, None)
+        out = self._run(MASS_MATRIX, nv * nv, q, None, None, p, "q", None, None)
         if cnp.PyArray_NDIM(<cnp.ndarray>out) == 1:
             return out.reshape(nv, nv)
         return out.reshape(-1, nv, nv)
 
     def forcing(self, q, qd, tau, p=None):
         """F(q, qd, tau) such that M(q) qdd = F."""
-        return self._run(_forcing, self.api.nv, q, qd, tau, p, "q", "qd", "tau")
+        return self._run(FORCING, self.api.nv, q, qd, tau, p, "q", "qd", "tau")
 
     def forward_dynamics(self, q, qd, tau, p=None, fext=None):
         """qdd = M(q)^-1 F(q, qd, tau [+ J^T w of the wrenches fext])."""
         if fext is not None:
             tau = as_float_array(tau, "tau") + self.external_forces(q, fext, p)
-        return self._run(_forward, self.api.nv, q, qd, tau, p, "q", "qd", "tau")
+        return self._run(FORWARD_DYNAMICS, self.api.nv, q, qd, tau, p, "q", "qd", "tau")
 
     def inverse_dynamics(self, q, qd, qdd, p=None, fext=None):
         """The joint torques (forces for prismatic joints) that give qdd [under fext]."""
-        tau = self._run(_inverse, self.api.nv, q, qd, qdd, p, "q", "qd", "qdd")
+        tau = self._run(INVERSE_DYNAMICS, self.api.nv, q, qd, qdd, p, "q", "qd", "qdd")
         if fext is not None:
             tau = tau - self.external_forces(q, fext, p)
         return tau
 
     def placements(self, q, p=None):
         """Per body, its orientation (row-major), origin and joint axis in the world."""
-        return self._run(_placements, 15 * self.api.nb, q, None, None, p, "q", None, None)
+        return self._run(PLACEMENTS, 15 * self.api.nb, q, None, None, p, "q", None, None)
 
     def frame_offsets(self, p=None):
         """Per frame, its axes (row-major) and origin in its body's frame."""
@@ -488,11 +468,11 @@ cdef class CompiledModel(_Evaluator):
 
     def gravity(self, q, p=None):
         """The gravity torques g(q) = inverse_dynamics(q, 0, 0)."""
-        return self._run(_gravity, self.api.nv, q, None, None, p, "q", None, None)
+        return self._run(GRAVITY, self.api.nv, q, None, None, p, "q", None, None)
 
     def energy(self, q, qd, p=None):
         """(kinetic, potential): floats, or arrays of shape (N,) for stacked states."""
-        out = self._run(_energy, 2, q, qd, None, p, "q", "qd", None)
+        out = self._run(ENERGY, 2, q, qd, None, p, "q", "qd", None)
         if cnp.PyArray_NDIM(<cnp.ndarray>out) == 1:
             return float(out[0]), float(out[1])
         return out[:, 0].copy(), out[:, 1].copy()
@@ -500,7 +480,7 @@ cdef class CompiledModel(_Evaluator):
     def regressor(self, q, qd, qdd, p=None):
         """Y(q, qd, qdd), shape (n, P), or (N, n, P) for stacked states."""
         cdef int nv = self.api.nv, nreg = self.api.nreg
-        out = self._run(_regressor, nv * nreg, q, qd, qdd, p, "q", "qd", "qdd")
+        out = self._run(REGRESSOR, nv * nreg, q, qd, qdd, p, "q", "qd", "qdd")
         if cnp.PyArray_NDIM(<cnp.ndarray>out) == 1:
             return out.reshape(nv, nreg)
         return out.reshape(-1, nv, nreg)
@@ -871,36 +851,25 @@ cdef int _poll_signals(void *ctx) noexcept nogil:
 
 # --- the derivative module's kernels -------------------------------------------------------
 
-# a kernel of (up to) three input arrays and three output matrices
-ctypedef int (*matrices3)(const gagen_derivatives_api *, const double *, const double *,
-                          const double *, const double *, double *, double *,
-                          double *) noexcept nogil
+# the derivative module's kernels, called by CompiledDerivatives._run
+cdef enum Derivative:
+    INVERSE_DERIVATIVES, FORWARD_DERIVATIVES, CORIOLIS, LINEARIZE
 
 
-cdef int _inverse_derivatives(const gagen_derivatives_api *api, const double *a,
-                              const double *b, const double *c, const double *p, double *o0,
-                              double *o1, double *o2) noexcept nogil:
-    api.inverse_dynamics_derivatives(a, b, c, p, o0, o1)
+cdef inline int _call_derivative(const gagen_derivatives_api *api, Derivative kernel,
+                                 const double *a, const double *b, const double *c,
+                                 const double *p, double *o0, double *o1,
+                                 double *o2) noexcept nogil:
+    """One derivative kernel at one state, into up to three matrices; its status."""
+    if kernel == FORWARD_DERIVATIVES:
+        return api.forward_dynamics_derivatives(a, b, c, p, o0, o1, o2)
+    if kernel == LINEARIZE:
+        return api.linearize(a, b, c, p, o0, o1)
+    if kernel == INVERSE_DERIVATIVES:
+        api.inverse_dynamics_derivatives(a, b, c, p, o0, o1)
+    else:
+        api.coriolis_matrix(a, b, p, o0)
     return 0
-
-
-cdef int _forward_derivatives(const gagen_derivatives_api *api, const double *a,
-                              const double *b, const double *c, const double *p, double *o0,
-                              double *o1, double *o2) noexcept nogil:
-    return api.forward_dynamics_derivatives(a, b, c, p, o0, o1, o2)
-
-
-cdef int _coriolis(const gagen_derivatives_api *api, const double *a, const double *b,
-                   const double *c, const double *p, double *o0, double *o1,
-                   double *o2) noexcept nogil:
-    api.coriolis_matrix(a, b, p, o0)
-    return 0
-
-
-cdef int _linearize(const gagen_derivatives_api *api, const double *a, const double *b,
-                    const double *c, const double *p, double *o0, double *o1,
-                    double *o2) noexcept nogil:
-    return api.linearize(a, b, c, p, o0, o1)
 
 
 cdef class CompiledDerivatives(_Evaluator):
@@ -916,7 +885,7 @@ cdef class CompiledDerivatives(_Evaluator):
                     self.api.parameter_defaults)
         self.parameter_vector = parameter_vector
 
-    cdef tuple _run(self, matrices3 kernel, int count, Py_ssize_t r0, Py_ssize_t c0,
+    cdef tuple _run(self, Derivative kernel, int count, Py_ssize_t r0, Py_ssize_t c0,
                     Py_ssize_t r1, Py_ssize_t c1, object x, object y, object z, object p,
                     str nx, str ny, str nz):
         """`count` fresh matrices, the first (r0, c0) and the others (r1, c1), from a kernel
@@ -948,12 +917,13 @@ cdef class CompiledDerivatives(_Evaluator):
         cdef Py_ssize_t i, failed = -1
         cdef int code, status = 0
         if rows < 0:
-            status = kernel(api, pa_, pb, pc, pp, p0, p1, p2)
+            status = _call_derivative(api, kernel, pa_, pb, pc, pp, p0, p1, p2)
         else:
             with nogil:
                 for i in range(rows):
-                    code = kernel(api, pa_ + i * sa, pb + i * sb, pc + i * sc, pp,
-                                  p0 + i * s0, p1 + i * s1, p2 + i * s2)
+                    code = _call_derivative(api, kernel, pa_ + i * sa, pb + i * sb,
+                                            pc + i * sc, pp, p0 + i * s0, p1 + i * s1,
+                                            p2 + i * s2)
                     if code != 0 and failed < 0:
                         failed = i
                         status = code
@@ -968,22 +938,22 @@ cdef class CompiledDerivatives(_Evaluator):
     def inverse_dynamics_derivatives(self, q, qd, qdd, p=None):
         """(dtau_dq, dtau_dqd) of tau = inverse_dynamics(q, qd, qdd)."""
         cdef Py_ssize_t nv = self.api.nv
-        return self._run(_inverse_derivatives, 2, nv, nv, nv, nv, q, qd, qdd, p,
+        return self._run(INVERSE_DERIVATIVES, 2, nv, nv, nv, nv, q, qd, qdd, p,
                          "q", "qd", "qdd")
 
     def forward_dynamics_derivatives(self, q, qd, tau, p=None):
         """(dqdd_dq, dqdd_dqd, dqdd_dtau = M^-1) of qdd = forward_dynamics(q, qd, tau)."""
         cdef Py_ssize_t nv = self.api.nv
-        return self._run(_forward_derivatives, 3, nv, nv, nv, nv, q, qd, tau, p,
+        return self._run(FORWARD_DERIVATIVES, 3, nv, nv, nv, nv, q, qd, tau, p,
                          "q", "qd", "tau")
 
     def coriolis_matrix(self, q, qd, p=None):
         """C(q, qd): C qd = the velocity terms, Mdot - 2C skew-symmetric."""
         cdef Py_ssize_t nv = self.api.nv
-        return self._run(_coriolis, 1, nv, nv, nv, nv, q, qd, None, p, "q", "qd", None)[0]
+        return self._run(CORIOLIS, 1, nv, nv, nv, nv, q, qd, None, p, "q", "qd", None)[0]
 
     def linearize(self, q, qd, tau, p=None):
         """(A, B) of x' = f(x, tau) at x = (q, qd)."""
         cdef Py_ssize_t nv = self.api.nv
-        return self._run(_linearize, 2, 2 * nv, 2 * nv, 2 * nv, nv, q, qd, tau, p,
+        return self._run(LINEARIZE, 2, 2 * nv, 2 * nv, 2 * nv, nv, q, qd, tau, p,
                          "q", "qd", "tau")
