@@ -175,6 +175,7 @@ def cpp_times(binary: Path, pinocchio_model, folder: Path, states: int = 1000,
     """Median µs per state of aba, rnea and crba over `states` stacked random states: each
     result left in Pinocchio's `data` (keys "aba", "rnea", "crba") or written, M in full,
     to a fresh array of the batch as gagen's batched call returns them ("..._stored")."""
+    folder.mkdir(parents=True, exist_ok=True)
     path = folder / "model.bin"
     pinocchio_model.saveToBinary(str(path))
     result = subprocess.run([str(binary), str(path), str(states), str(repeats)],
