@@ -17,7 +17,7 @@ from gagen.runtime.lambdify import LambdifyDynamics
 from gagen.symbolic.aba import forward_dynamics_aba, forward_dynamics_aba_after
 from gagen.symbolic.recursive import derive_recursive
 
-RTOL = 1e-10
+RTOL = 1e-12
 
 
 def branched_prismatic_model() -> Model:

@@ -16,7 +16,7 @@ from gagen.runtime.lambdify import LambdifyDynamics
 from gagen.symbolic.gibbs_appell import derive
 from gagen.symbolic.recursive import derive_recursive
 
-RTOL = 1e-11
+RTOL = 1e-12
 
 
 def _outputs(dyn, q, qd, x, p) -> dict[str, np.ndarray]:
