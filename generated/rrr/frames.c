@@ -18,27 +18,28 @@ void rrr_placements(const double *q, const double *p, double *X)
     gagen_sincos(q[2], &sn2, &cs2);
     const double t11 = cs0;
     const double t12 = sn0;
-    const double t14 = cs1;
-    const double t18 = sn1;
-    const double t45 = cs2;
-    const double t46 = sn2;
-    const double t47 = t45*t18 + t46*t14;
-    const double t49 = t45*t14 - t46*t18;
-    const double t108 = -t12*t14;
-    const double t109 = t12*t18;
-    const double t110 = t11*t14;
-    const double t111 = -t11*t18;
-    const double t112 = -p[1]*t12;
-    const double t113 = p[1]*t11;
-    const double t114 = t45*t108 + t46*t109;
-    const double t115 = t45*t109 - t46*t108;
-    const double t116 = t45*t110 + t46*t111;
-    const double t117 = t45*t111 - t46*t110;
-    const double t118 = p[2]*t108 + t112;
-    const double t119 = p[2]*t110 + t113;
-    const double t120 = p[2]*t18;
+    const double t13 = -t12;
+    const double t15 = cs1;
+    const double t19 = sn1;
+    const double t46 = cs2;
+    const double t47 = sn2;
+    const double t48 = t46*t19 + t47*t15;
+    const double t50 = t46*t15 - t47*t19;
+    const double t109 = -t12*t15;
+    const double t110 = t12*t19;
+    const double t111 = t11*t15;
+    const double t112 = -t11*t19;
+    const double t113 = -p[1]*t12;
+    const double t114 = p[1]*t11;
+    const double t115 = t46*t109 + t47*t110;
+    const double t116 = t46*t110 - t47*t109;
+    const double t117 = t46*t111 + t47*t112;
+    const double t118 = t46*t112 - t47*t111;
+    const double t119 = p[2]*t109 + t113;
+    const double t120 = p[2]*t111 + t114;
+    const double t121 = p[2]*t19;
     X[0] = t11;
-    X[1] = -t12;
+    X[1] = t13;
     X[2] = 0;
     X[3] = t12;
     X[4] = t11;
@@ -53,32 +54,32 @@ void rrr_placements(const double *q, const double *p, double *X)
     X[13] = 0;
     X[14] = 1;
     X[15] = t11;
-    X[16] = t108;
-    X[17] = t109;
+    X[16] = t109;
+    X[17] = t110;
     X[18] = t12;
-    X[19] = t110;
-    X[20] = t111;
+    X[19] = t111;
+    X[20] = t112;
     X[21] = 0;
-    X[22] = t18;
-    X[23] = t14;
-    X[24] = t112;
-    X[25] = t113;
+    X[22] = t19;
+    X[23] = t15;
+    X[24] = t113;
+    X[25] = t114;
     X[26] = 0;
     X[27] = t11;
     X[28] = t12;
     X[29] = 0;
     X[30] = t11;
-    X[31] = t114;
-    X[32] = t115;
+    X[31] = t115;
+    X[32] = t116;
     X[33] = t12;
-    X[34] = t116;
-    X[35] = t117;
+    X[34] = t117;
+    X[35] = t118;
     X[36] = 0;
-    X[37] = t47;
-    X[38] = t49;
-    X[39] = t118;
-    X[40] = t119;
-    X[41] = t120;
+    X[37] = t48;
+    X[38] = t50;
+    X[39] = t119;
+    X[40] = t120;
+    X[41] = t121;
     X[42] = t11;
     X[43] = t12;
     X[44] = 0;
@@ -169,10 +170,222 @@ static const int gagen_kind[GAGEN_FR_NB] = { 1, 1, 1 };
 static const int gagen_column[GAGEN_FR_NB] = { 0, 1, 2 };
 static const int gagen_frame_body[GAGEN_FR_NF] = { 0, 0, 1, 1, 2, 2 };
 
-/* (R, pos) of frame k from the placements X and the offsets F */
-static void gagen_frame_pose(const double *X, const double *F, int k, double *R, double *pos)
+/* Body b's joint alone: R_j (row-major), d_j, and its unit axis in the body's frame. */
+static void gagen_joint_transform(const double *q, const double *p, int b, double *T)
 {
-    const double *Rf = F + 12 * k, *pf = Rf + 9;
+    switch (b) {
+    case 0: {
+    double sn0, cs0;
+    gagen_sincos(q[0], &sn0, &cs0);
+    const double t11 = cs0;
+    const double t12 = sn0;
+    const double t13 = -t12;
+    T[0] = t11;
+    T[1] = t13;
+    T[2] = 0;
+    T[3] = t12;
+    T[4] = t11;
+    T[5] = 0;
+    T[6] = 0;
+    T[7] = 0;
+    T[8] = 1;
+    T[9] = 0;
+    T[10] = 0;
+    T[11] = 0;
+    T[12] = 0;
+    T[13] = 0;
+    T[14] = 1;
+        break;
+    }
+    case 1: {
+    double sn1, cs1;
+    gagen_sincos(q[1], &sn1, &cs1);
+    const double t15 = cs1;
+    const double t19 = sn1;
+    T[0] = 1;
+    T[1] = 0;
+    T[2] = 0;
+    T[3] = 0;
+    T[4] = t15;
+    T[5] = -t19;
+    T[6] = 0;
+    T[7] = t19;
+    T[8] = t15;
+    T[9] = 0;
+    T[10] = p[1];
+    T[11] = 0;
+    T[12] = 1;
+    T[13] = 0;
+    T[14] = 0;
+        break;
+    }
+    case 2: {
+    double sn2, cs2;
+    gagen_sincos(q[2], &sn2, &cs2);
+    const double t46 = cs2;
+    const double t47 = sn2;
+    T[0] = 1;
+    T[1] = 0;
+    T[2] = 0;
+    T[3] = 0;
+    T[4] = t46;
+    T[5] = -t47;
+    T[6] = 0;
+    T[7] = t47;
+    T[8] = t46;
+    T[9] = 0;
+    T[10] = p[2];
+    T[11] = 0;
+    T[12] = 1;
+    T[13] = 0;
+    T[14] = 0;
+        break;
+    }
+    default: {  /* no such body (the callers pass the tree's): nothing moves */
+        int i;
+        for (i = 0; i < 15; ++i) T[i] = 0.0;
+        break;
+    }
+    }
+    (void)q;
+    (void)p;
+}
+
+/* Frame k's axes and origin on its body (12 values), of that frame alone. */
+static void gagen_frame_offset(const double *p, int k, double *F)
+{
+    switch (k) {
+    case 0: {
+    F[0] = 1;
+    F[1] = 0;
+    F[2] = 0;
+    F[3] = 0;
+    F[4] = 1;
+    F[5] = 0;
+    F[6] = 0;
+    F[7] = 0;
+    F[8] = 1;
+    F[9] = 0;
+    F[10] = 0;
+    F[11] = 0;
+        break;
+    }
+    case 1: {
+    F[0] = 1;
+    F[1] = 0;
+    F[2] = 0;
+    F[3] = 0;
+    F[4] = 1;
+    F[5] = 0;
+    F[6] = 0;
+    F[7] = 0;
+    F[8] = 1;
+    F[9] = 0;
+    F[10] = 0;
+    F[11] = 0;
+        break;
+    }
+    case 2: {
+    F[0] = 1;
+    F[1] = 0;
+    F[2] = 0;
+    F[3] = 0;
+    F[4] = 1;
+    F[5] = 0;
+    F[6] = 0;
+    F[7] = 0;
+    F[8] = 1;
+    F[9] = 0;
+    F[10] = 0;
+    F[11] = 0;
+        break;
+    }
+    case 3: {
+    F[0] = 1;
+    F[1] = 0;
+    F[2] = 0;
+    F[3] = 0;
+    F[4] = 1;
+    F[5] = 0;
+    F[6] = 0;
+    F[7] = 0;
+    F[8] = 1;
+    F[9] = 0;
+    F[10] = 0;
+    F[11] = 0;
+        break;
+    }
+    case 4: {
+    F[0] = 1;
+    F[1] = 0;
+    F[2] = 0;
+    F[3] = 0;
+    F[4] = 1;
+    F[5] = 0;
+    F[6] = 0;
+    F[7] = 0;
+    F[8] = 1;
+    F[9] = 0;
+    F[10] = 0;
+    F[11] = 0;
+        break;
+    }
+    case 5: {
+    F[0] = 1;
+    F[1] = 0;
+    F[2] = 0;
+    F[3] = 0;
+    F[4] = 1;
+    F[5] = 0;
+    F[6] = 0;
+    F[7] = 0;
+    F[8] = 1;
+    F[9] = 0;
+    F[10] = 0;
+    F[11] = 0;
+        break;
+    }
+    default: {  /* no such frame (the callers check): the identity at the origin */
+        int i;
+        for (i = 0; i < 12; ++i) F[i] = (i % 4 == 0 && i < 9) ? 1.0 : 0.0;
+        break;
+    }
+    }
+    (void)p;
+}
+
+/* The placements (as `placements` writes them, at X + 15 b) of body b and its ancestors
+ * only: a frame's kinematics reads no other body. */
+static void gagen_path_placements(const double *q, const double *p, int b, double *X)
+{
+    int path[GAGEN_FR_NB], m = 0, i, j;
+    for (; b >= 0; b = gagen_parent[b]) path[m++] = b;
+    while (m-- > 0) {
+        const int c = path[m], parent = gagen_parent[c];
+        double T[15];
+        double *R = X + 15 * c, *pos = R + 9, *axis = R + 12;
+        gagen_joint_transform(q, p, c, T);
+        if (parent < 0) {
+            for (i = 0; i < 12; ++i) R[i] = T[i];
+        } else {
+            const double *Rp = X + 15 * parent, *pp = Rp + 9;
+            for (i = 0; i < 3; ++i) {
+                for (j = 0; j < 3; ++j)
+                    R[3 * i + j] = Rp[3 * i] * T[j] + Rp[3 * i + 1] * T[3 + j]
+                                   + Rp[3 * i + 2] * T[6 + j];
+                pos[i] = pp[i] + Rp[3 * i] * T[9] + Rp[3 * i + 1] * T[10]
+                         + Rp[3 * i + 2] * T[11];
+            }
+        }
+        for (i = 0; i < 3; ++i)
+            axis[i] = R[3 * i] * T[12] + R[3 * i + 1] * T[13] + R[3 * i + 2] * T[14];
+    }
+}
+
+/* (R, pos) of frame k from the placements X and frame k's offset Fk (12 values) */
+static void gagen_frame_pose(const double *X, const double *Fk, int k, double *R, double *pos)
+{
+    const double *Rf = Fk, *pf = Rf + 9;
     int b = gagen_frame_body[k], i, j;
     if (b < 0) {
         for (i = 0; i < 9; ++i) R[i] = Rf[i];
@@ -236,25 +449,31 @@ static int gagen_frame_columns(const double *X, int k, const double *pos, double
     return m;
 }
 
+/* Places frame k's body, its ancestors and frame k: X, and the frame's R and pos. */
+static void gagen_place_frame(const double *q, const double *p, int k, double *X, double *R,
+                              double *pos)
+{
+    double Fk[12];
+    gagen_frame_offset(p, k, Fk);
+    gagen_path_placements(q, p, gagen_frame_body[k], X);
+    gagen_frame_pose(X, Fk, k, R, pos);
+}
+
 int rrr_frame_placement(const double *q, const double *p, int frame, double *R,
                                 double *pos)
 {
-    double X[15 * GAGEN_FR_NB], F[12 * GAGEN_FR_NF];
+    double X[15 * GAGEN_FR_NB];
     if (frame < 0 || frame >= GAGEN_FR_NF) return GAGEN_ERR_BAD_ARG;
-    rrr_placements(q, p, X);
-    rrr_frame_offsets(p, F);
-    gagen_frame_pose(X, F, frame, R, pos);
+    gagen_place_frame(q, p, frame, X, R, pos);
     return 0;
 }
 
 int rrr_frame_jacobian(const double *q, const double *p, int frame, double *J)
 {
-    double X[15 * GAGEN_FR_NB], F[12 * GAGEN_FR_NF], R[9], pos[3], col[6 * GAGEN_FR_NV];
+    double X[15 * GAGEN_FR_NB], R[9], pos[3], col[6 * GAGEN_FR_NV];
     int cols[GAGEN_FR_NV], m, i, c;
     if (frame < 0 || frame >= GAGEN_FR_NF) return GAGEN_ERR_BAD_ARG;
-    rrr_placements(q, p, X);
-    rrr_frame_offsets(p, F);
-    gagen_frame_pose(X, F, frame, R, pos);
+    gagen_place_frame(q, p, frame, X, R, pos);
     for (i = 0; i < 6 * GAGEN_FR_NV; ++i) J[i] = 0.0;
     m = gagen_frame_columns(X, frame, pos, col, cols);
     for (c = 0; c < m; ++c)
@@ -265,12 +484,10 @@ int rrr_frame_jacobian(const double *q, const double *p, int frame, double *J)
 int rrr_frame_velocity(const double *q, const double *qd, const double *p, int frame,
                                double *v)
 {
-    double X[15 * GAGEN_FR_NB], F[12 * GAGEN_FR_NF], R[9], pos[3], col[6 * GAGEN_FR_NV];
+    double X[15 * GAGEN_FR_NB], R[9], pos[3], col[6 * GAGEN_FR_NV];
     int cols[GAGEN_FR_NV], m, i, c;
     if (frame < 0 || frame >= GAGEN_FR_NF) return GAGEN_ERR_BAD_ARG;
-    rrr_placements(q, p, X);
-    rrr_frame_offsets(p, F);
-    gagen_frame_pose(X, F, frame, R, pos);
+    gagen_place_frame(q, p, frame, X, R, pos);
     m = gagen_frame_columns(X, frame, pos, col, cols);
     for (i = 0; i < 6; ++i) v[i] = 0.0;
     for (c = 0; c < m; ++c)
@@ -289,7 +506,7 @@ int rrr_frame_forces(const double *q, const double *p, int count, const int *fra
     rrr_frame_offsets(p, F);
     for (k = 0; k < count; ++k) {
         const double *w = wrenches + 6 * k;
-        gagen_frame_pose(X, F, frames[k], R, pos);
+        gagen_frame_pose(X, F + 12 * frames[k], frames[k], R, pos);
         m = gagen_frame_columns(X, frames[k], pos, col, cols);
         for (c = 0; c < m; ++c) {
             double s = 0.0;

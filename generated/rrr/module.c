@@ -73,7 +73,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "ac68e08b3b8e9f573b80dff1fb136258e72869b23a0fe7b08676eb02cda2f4ed") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "87511b58fefa820f31bb5e764e485224a61adf51ce3210c08fecb1a8e0fc25cf") < 0) {
         Py_DECREF(module);
         return NULL;
     }

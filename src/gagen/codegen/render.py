@@ -22,7 +22,7 @@ from sympy.printing.precedence import PRECEDENCE, precedence
 from .. import __version__
 from ..manifest import FRICTION_WIDTH, QUATERNION_RESTORING, ModelInfo
 from ..symbolic.differentiate import needed_definitions
-from ..symbolic.frames import add_frame_kinematics
+from ..symbolic.frames import OFFSET_SIZE, TRANSFORM_SIZE, add_frame_kinematics
 from ..symbolic.gibbs_appell import Equations
 from ..symbolic.regressor import (
     KINEMATICS_PER_BODY,
@@ -555,10 +555,11 @@ class _Kernels:
 
     def block(self, kernel: str, exprs: list[sp.Expr], targets: list[str],
               assignments=None, externals: dict[sp.Symbol, str] | None = None,
-              cache: bool = True) -> CodeBlock:
+              cache: bool = True, split: bool = True) -> CodeBlock:
         """The code of one kernel: the assignments its outputs need (or those given), then
         the outputs. `externals` are symbols read from an array (`S[3]`), not computed;
-        `cache` shares each assignment's text with the other kernels (names must agree)."""
+        `cache` shares each assignment's text with the other kernels (names must agree);
+        `split=False` keeps a big block whole (a case of a switch, not a kernel)."""
         if assignments is None:
             assignments = self.cse.needed(exprs)
         printer = self.printer
@@ -573,7 +574,7 @@ class _Kernels:
         block = CodeBlock(prelude=printer.trig_prelude(all_exprs), locals=reads + local,
                           outputs=outputs)
         size = sum(len(text) for _, text in local + outputs)
-        if size > self.split_chars:
+        if split and size > self.split_chars:
             self._split(block, kernel, assignments, exprs, reads, all_exprs)
         return block
 
@@ -703,6 +704,14 @@ def _stages(eqs: Equations, kernels: _Kernels, inline_stage_ops: int) -> Stages:
                   aba=aba)
 
 
+def _case_blocks(kernels: _Kernels, exprs: list[sp.Expr], size: int, array: str
+                 ) -> list[CodeBlock]:
+    """One whole block per `size` consecutive outputs, writing `array[0 .. size - 1]`."""
+    return [kernels.block("case", exprs[k: k + size], [f"{array}[{i}]" for i in range(size)],
+                          split=False)
+            for k in range(0, len(exprs), size)]
+
+
 def _regressor_blocks(eqs: Equations, kernels: _Kernels, config: CodegenConfig,
                       reg: RegressorKinematics, parameters: list[sp.Expr]
                       ) -> dict[str, CodeBlock]:
@@ -781,6 +790,12 @@ def generate(eqs: Equations, module_name: str, key: str,
                                        [f"F[{k}]" for k in range(len(out["frame_offsets"]))]),
         **_regressor_blocks(eqs, kernels, config, reg, reg_parameters),
     }
+    # per body and per frame, the code of one alone: a frame's kinematics then places its
+    # path to the world, not every body and every frame
+    cases = {
+        "joint_transforms": _case_blocks(kernels, out["joint_transforms"], TRANSFORM_SIZE, "T"),
+        "frame_offsets": _case_blocks(kernels, out["frame_offsets"], OFFSET_SIZE, "F"),
+    }
     stages = _stages(eqs, kernels, config.inline_stage_ops)
     info = ModelInfo.from_model(model)
     context = {
@@ -803,6 +818,7 @@ def generate(eqs: Equations, module_name: str, key: str,
         "ldlt": ldlt_plan(n, zero),
         "zero_fill": zero_fill,
         "blocks": blocks,
+        "cases": cases,
         "stages": stages,
         "module_name": module_name,
         "key": key,

@@ -447,14 +447,26 @@ cdef class CompiledModel(_Evaluator):
         if which == 2:
             rows = _rows(b, rows, "qd")
         cdef int nout = 12 if which == 0 else (6 * api.nv if which == 1 else 6)
-        cdef cnp.npy_intp dims[2]
-        dims[0] = rows if rows >= 0 else 1
-        dims[1] = nout
-        cdef cnp.ndarray out = cnp.PyArray_EMPTY(2, dims, cnp.NPY_DOUBLE, 0)
+        # allocated in its final shape: (N,) + (12,), (6, NV) or (6,), N left out for one
+        # state (a reshape or a row view afterwards costs more than the kernel on a small
+        # robot)
+        cdef cnp.npy_intp dims[3]
+        cdef int nd = 0
+        if rows >= 0:
+            dims[nd] = rows
+            nd += 1
+        if which == 1:
+            dims[nd] = 6
+            dims[nd + 1] = api.nv
+            nd += 2
+        else:
+            dims[nd] = nout
+            nd += 1
+        cdef cnp.ndarray out = cnp.PyArray_EMPTY(nd, dims, cnp.NPY_DOUBLE, 0)
         cdef double *pa_ = _data(a)
         cdef double *pb = _data(b)
         cdef double *po = _data(out)
-        cdef Py_ssize_t sa = _step(a), sb = _step(b), i, count = dims[0]
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), i, count = rows if rows >= 0 else 1
         with nogil:
             for i in range(count):
                 if which == 0:
@@ -464,7 +476,7 @@ cdef class CompiledModel(_Evaluator):
                     api.frame_jacobian(pa_ + i * sa, pp, frame, po + i * nout)
                 else:
                     api.frame_velocity(pa_ + i * sa, pb + i * sb, pp, frame, po + i * nout)
-        return out if rows >= 0 else out[0]
+        return out
 
     def gravity(self, q, p=None):
         """The gravity torques g(q) = inverse_dynamics(q, 0, 0)."""

@@ -60,8 +60,7 @@ class CompiledDynamics(Dynamics):
         return out[..., :9].reshape(out.shape[:-1] + (3, 3)), out[..., 9:].copy()
 
     def frame_jacobian(self, q, frame, p=None):
-        out = self.kernels.frame(1, frame_index(self.info, frame), q, None, p)
-        return out.reshape(out.shape[:-1] + (6, self.nv))
+        return self.kernels.frame(1, frame_index(self.info, frame), q, None, p)
 
     def frame_velocity(self, q, qd, frame, p=None):
         return self.kernels.frame(2, frame_index(self.info, frame), q, qd, p)

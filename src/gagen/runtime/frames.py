@@ -25,7 +25,11 @@ REVOLUTE, PRISMATIC, FLOATING = (JOINT_KINDS[k] for k in ("revolute", "prismatic
 
 def frame_index(info: ModelInfo, frame) -> int:
     """The index of a frame given by name (or by index); KeyError naming the choices."""
-    if isinstance(frame, (int, np.integer)) and not isinstance(frame, bool):
+    if type(frame) is str:  # the common case first: np.integer's isinstance costs 0.3 us
+        index = info.frame_indices.get(frame)
+        if index is not None:
+            return index
+    elif isinstance(frame, (int, np.integer)) and not isinstance(frame, bool):
         if 0 <= frame < len(info.frames):
             return int(frame)
         raise KeyError(f"frame index {frame} out of range (the model has "

@@ -7,6 +7,10 @@
   the world, and its joint's axis in the world (R s; zero for a fixed or floating joint).
   R = R_parent R_joint and p = p_parent + R_parent d_joint, one body at a time, each entry
   named: the size is O(bodies).
+- `joint_transforms`: per body 15 values in its own coordinates and the parameters: its
+  joint's rotation R_j (row-major), the origin's offset d_j in the parent's frame, and
+  the joint's unit axis in the body's frame (zero for a fixed or floating joint). The C
+  places one frame's path from these alone (R = R_parent R_j, ...), not every body.
 - `frame_offsets`: per frame of `Model.frames` 12 values in the parameters only: the
   frame's axes and origin in its body's frame (a merged link's placement; the identity for
   a body's own frames; a frame welded to the world is placed in the world).
@@ -32,6 +36,7 @@ from .kinematics import joint_transform, unit_axis
 from .vec3 import IDENTITY, ZERO, Mat3, Vec3, add, mat_mat, mat_vec
 
 PLACEMENT_SIZE = 15  # R (9), p (3), the joint's axis in the world (3)
+TRANSFORM_SIZE = 15  # R_j (9), d_j (3), the joint's axis in the body's frame (3)
 OFFSET_SIZE = 12  # R (9), p (3)
 
 
@@ -42,6 +47,7 @@ def add_frame_kinematics(eqs: Equations) -> Equations:
     index = model.indices()
     placed: dict[str, tuple[Mat3, Vec3]] = {WORLD: (IDENTITY, ZERO)}
     placements: list[sp.Expr] = []
+    transforms: list[sp.Expr] = []
     for body in model.bodies:
         joint = body.joint
         iq = index.get(body.name, (0, 0))[0]
@@ -52,14 +58,16 @@ def add_frame_kinematics(eqs: Equations) -> Equations:
         R_p, p_p = placed[body.parent]
         R = rec.named_rows(mat_mat(R_p, R_j))
         p = rec.named(add(p_p, mat_vec(R_p, d_j)))
-        axis = rec.named(mat_vec(R, unit_axis(joint.axis))) \
-            if joint.moves and not joint.floating else ZERO
+        local_axis = unit_axis(joint.axis) if joint.moves and not joint.floating else ZERO
+        axis = rec.named(mat_vec(R, local_axis)) if local_axis is not ZERO else ZERO
         placed[body.name] = (R, p)
         placements += [*(e for row in R for e in row), *p, *axis]
+        transforms += [*(e for row in R_j for e in row), *d_j, *local_axis]
     offsets: list[sp.Expr] = []
     for frame in model.frames:
         offsets += [*sp.Matrix(frame.rotation), *sp.Matrix(frame.xyz)]
     eqs.intermediates = rec.definitions
     eqs.placements = placements
+    eqs.joint_transforms = [sp.sympify(e) for e in transforms]
     eqs.frame_offsets = [sp.sympify(e) for e in offsets]
     return eqs

@@ -60,6 +60,7 @@ class Equations:
     derivation: str = "gibbs-appell"  # or "recursive" (symbolic/derivation.py)
     # where the bodies are in the world and the frames on their bodies (symbolic/frames.py)
     placements: list[sp.Expr] | None = None
+    joint_transforms: list[sp.Expr] | None = None
     frame_offsets: list[sp.Expr] | None = None
     # Y(q, qd, qdd) with inverse_dynamics = Y pi, and pi in the parameters
     # (symbolic.regressor.attach_regressor; None until attached). Y is written in
@@ -106,6 +107,7 @@ class Equations:
             outputs["pivots"] = list(self.pivots)
         if self.placements is not None:
             outputs["placements"] = list(self.placements)
+            outputs["joint_transforms"] = list(self.joint_transforms)
             outputs["frame_offsets"] = list(self.frame_offsets)
         return outputs
 
