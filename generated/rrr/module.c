@@ -73,7 +73,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "87511b58fefa820f31bb5e764e485224a61adf51ce3210c08fecb1a8e0fc25cf") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "c815c312748dcbccf38561d6fe516835ba656b79f6d5b9d7d061032126d605af") < 0) {
         Py_DECREF(module);
         return NULL;
     }

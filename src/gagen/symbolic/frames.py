@@ -58,8 +58,9 @@ def add_frame_kinematics(eqs: Equations) -> Equations:
         R_p, p_p = placed[body.parent]
         R = rec.named_rows(mat_mat(R_p, R_j))
         p = rec.named(add(p_p, mat_vec(R_p, d_j)))
-        local_axis = unit_axis(joint.axis) if joint.moves and not joint.floating else ZERO
-        axis = rec.named(mat_vec(R, local_axis)) if local_axis is not ZERO else ZERO
+        has_axis = joint.moves and not joint.floating
+        local_axis = unit_axis(joint.axis) if has_axis else ZERO
+        axis = rec.named(mat_vec(R, local_axis)) if has_axis else ZERO
         placed[body.name] = (R, p)
         placements += [*(e for row in R for e in row), *p, *axis]
         transforms += [*(e for row in R_j for e in row), *d_j, *local_axis]
