@@ -226,6 +226,15 @@ cdef inline cnp.ndarray _matrix(Py_ssize_t rows, Py_ssize_t cols):
     return cnp.PyArray_EMPTY(2, dims, cnp.NPY_DOUBLE, 0)
 
 
+cdef inline cnp.ndarray _vectors(Py_ssize_t rows, Py_ssize_t n):
+    """A fresh (n,) array, or (rows, n) when rows >= 0."""
+    cdef cnp.npy_intp dims[1]
+    if rows < 0:
+        dims[0] = n
+        return cnp.PyArray_EMPTY(1, dims, cnp.NPY_DOUBLE, 0)
+    return _matrix(rows, n)
+
+
 cdef inline cnp.ndarray _matrices(Py_ssize_t rows, Py_ssize_t r, Py_ssize_t c):
     """A fresh (r, c) array, or (rows, r, c) when rows >= 0."""
     cdef cnp.npy_intp dims[3]
@@ -350,19 +359,13 @@ cdef class CompiledModel(_Evaluator):
             rows = _rows(b, rows, ny)
         if nz is not None:
             rows = _rows(c, rows, nz)
-        cdef cnp.npy_intp dims[2]
-        cdef cnp.ndarray out
+        cdef cnp.ndarray out = _vectors(rows, nout)
         cdef int status = 0
         if rows < 0:
-            dims[0] = nout
-            out = cnp.PyArray_EMPTY(1, dims, cnp.NPY_DOUBLE, 0)
             status = _call(api, kernel, _data(a), _data(b), _data(c), pp, _data(out))
             if status:
                 self._failed(-1, status)
             return out
-        dims[0] = rows
-        dims[1] = nout
-        out = cnp.PyArray_EMPTY(2, dims, cnp.NPY_DOUBLE, 0)
         cdef double *pa_ = _data(a)
         cdef double *pb = _data(b)
         cdef double *pc = _data(c)
@@ -447,22 +450,9 @@ cdef class CompiledModel(_Evaluator):
         if which == 2:
             rows = _rows(b, rows, "qd")
         cdef int nout = 12 if which == 0 else (6 * api.nv if which == 1 else 6)
-        # allocated in its final shape: (N,) + (12,), (6, NV) or (6,), N left out for one
-        # state (a reshape or a row view afterwards costs more than the kernel on a small
-        # robot)
-        cdef cnp.npy_intp dims[3]
-        cdef int nd = 0
-        if rows >= 0:
-            dims[nd] = rows
-            nd += 1
-        if which == 1:
-            dims[nd] = 6
-            dims[nd + 1] = api.nv
-            nd += 2
-        else:
-            dims[nd] = nout
-            nd += 1
-        cdef cnp.ndarray out = cnp.PyArray_EMPTY(nd, dims, cnp.NPY_DOUBLE, 0)
+        # allocated in its final shape (a reshape or a row view afterwards costs more than
+        # the kernel on a small robot)
+        cdef cnp.ndarray out = _matrices(rows, 6, api.nv) if which == 1 else _vectors(rows, nout)
         cdef double *pa_ = _data(a)
         cdef double *pb = _data(b)
         cdef double *po = _data(out)
