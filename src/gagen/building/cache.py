@@ -356,7 +356,9 @@ def install_received_module(cache: Path, file_name: str, data: bytes, sha256: st
     try:
         (tmp / file_name).write_bytes(data)
         (tmp / _CHECKSUM_FILE).write_text(_checksum(tmp / file_name))
-        if entry.exists():  # damaged: set aside, then replaced
+        # damaged: set aside, then replaced; but another worker process of this machine may
+        # have just installed an intact copy, which it is importing: that one stays
+        if entry.exists() and not cached_module_is_intact(entry, file_name):
             discard_cache_entry(entry)
         os.rename(tmp, entry)
     except OSError:
