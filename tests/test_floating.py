@@ -420,3 +420,80 @@ def test_frames_accept_stacked_states_and_return_fresh_arrays(anymal):
     again = anymal.frame_jacobian(Q[1], "LF_FOOT")
     assert not np.shares_memory(first, again)
     assert math.isclose(np.linalg.det(R[0]), 1.0, rel_tol=1e-12)
+
+
+# ------------------------------------------------------------ integrate and difference
+
+# relative rotations of the base: none, tiny, a turn of 1 rad, and within 1e-3 .. 1e-12 of a
+# half turn and exactly one, where the angle from a rotation matrix's trace loses half its
+# digits and a symmetric matrix gives the axis only up to its entries' signs
+HALF_TURN = np.pi
+ANGLES = (0.0, 1e-12, 1e-7, 1e-3, 1.0, HALF_TURN - 1e-3, HALF_TURN - 1e-6, HALF_TURN - 1e-7,
+          HALF_TURN - 1e-9, HALF_TURN - 1e-12, HALF_TURN)
+# axes with mixed signs (a half turn's matrix shows only |n_i| and the products n_i n_j)
+AXES = ((1.0, -1.0, 0.0), (0.0, 0.0, -1.0), (0.3, -0.5, 0.8), (-2.0, 1.0, 3.0))
+
+
+@pytest.fixture(scope="module")
+def anymal_reference(anymal):
+    model = pin.buildModelFromUrdf(str(URDF / "anymal_c.urdf"), pin.JointModelFreeFlyer())
+    return Reference(anymal, model)
+
+
+def turned(q, angle: float, axis) -> np.ndarray:
+    """q with its base turned by `angle` about `axis` (in the base's frame): the quaternion
+    q ⊗ (sin(angle/2) n, cos(angle/2)), written out here."""
+    n = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    r = np.append(np.sin(angle / 2) * n, np.cos(angle / 2))
+    (x, y, z, w), (a, b, c, d) = q[3:7], r
+    out = np.array(q, dtype=float)
+    out[3:7] = [w * a + d * x + y * c - z * b, w * b + d * y + z * a - x * c,
+                w * c + d * z + x * b - y * a, w * d - x * a - y * b - z * c]
+    return out
+
+
+def assert_same_configuration(a, b, what: str) -> None:
+    """Equal positions and joints, and quaternions equal up to sign (one orientation)."""
+    a, b = np.asarray(a), np.asarray(b)
+    plain = np.r_[0:3, 7:a.size]
+    np.testing.assert_allclose(a[plain], b[plain], rtol=0, atol=1e-12, err_msg=what)
+    sign = 1.0 if np.dot(a[3:7], b[3:7]) >= 0 else -1.0
+    np.testing.assert_allclose(a[3:7], sign * b[3:7], rtol=0, atol=1e-12, err_msg=what)
+
+
+@pytest.mark.parametrize("angle", ANGLES, ids=lambda a: f"pi-{np.pi - a:.0e}" if a > 3 else
+                         f"{a:.0e}")
+def test_integrate_and_difference_near_a_half_turn(anymal, anymal_reference, angle):
+    """integrate(q0, difference(q0, q1)) == q1 and difference(q0, integrate(q0, v)) == v
+    (to 1e-12) for base rotations up to and at a half turn, both against Pinocchio's
+    integrate and difference; q1's quaternion and its negative give the same difference.
+    At exactly a half turn w and -w are one rotation: either answer must reach q1."""
+    dyn, ref = anymal, anymal_reference
+    m = ref.model
+    rng = np.random.default_rng(31)
+    for axis in AXES:
+        q0, u, _ = random_state(dyn, rng)
+        q1 = random_state(dyn, rng)[0]
+        q1[3:7] = turned(q0, angle, axis)[3:7]
+        v = dyn.difference(q0, q1)
+        assert abs(np.linalg.norm(v[3:6]) - angle) <= 1e-12, "the angle of the rotation"
+        assert_same_configuration(dyn.integrate(q0, v), q1, "integrate(q0, difference)")
+        flipped = q1.copy()
+        flipped[3:7] *= -1
+        np.testing.assert_allclose(dyn.difference(q0, flipped), v, rtol=0, atol=1e-12)
+        theirs = ref.ours(pin.difference(m, ref.q(q0), ref.q(q1)))
+        if angle < HALF_TURN:
+            np.testing.assert_allclose(v, theirs, rtol=0, atol=1e-12, err_msg="difference")
+        else:
+            assert_same_configuration(dyn.integrate(q0, theirs), q1, "Pinocchio's answer")
+        # the inverse: a velocity whose rotation vector has this length
+        u[3:6] = angle * np.asarray(axis) / np.linalg.norm(axis)
+        moved = dyn.integrate(q0, u)
+        assert_same_configuration(moved, _ours_q(ref, pin.integrate(m, ref.q(q0), ref.v(u))),
+                                  "integrate")
+        back = dyn.difference(q0, moved)
+        if angle < HALF_TURN:
+            np.testing.assert_allclose(back, u, rtol=0, atol=1e-12, err_msg="the inverse")
+        else:
+            assert abs(np.linalg.norm(back[3:6]) - HALF_TURN) <= 1e-12
+            assert_same_configuration(dyn.integrate(q0, back), moved, "the inverse at pi")
