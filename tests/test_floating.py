@@ -280,20 +280,62 @@ bodies:
 """
 
 
+# the tumble: from a turned, displaced base; g = 0
+TUMBLE_Q0 = np.array([0.1, -0.2, 0.3, *(np.array([0.3, -0.5, 0.2, 0.8]) / math.sqrt(1.02)), 0.4])
+TUMBLE_V0 = np.array([0.3, 0.0, 0.1, 1.0, 2.0, 0.5, 3.0])
+TUMBLE_T = np.linspace(0.0, 5.0, 501)
+
+
+@pytest.fixture(scope="module")
+def tumble_reference():
+    """The tumble integrated with Pinocchio alone, by SciPy's DOP853 at 1e-13: aba for the
+    accelerations, and its tangent map (q' = T(q) v, Pinocchio's integrate differentiated)
+    for the configuration's rate, so the base's velocity moves its quaternion as Pinocchio
+    says, in the base's frame."""
+    from scipy.integrate import solve_ivp
+
+    from gagen.model.modelfile import parse_model_text
+
+    ref = Reference(None, pinocchio_model(parse_model_text(TUMBLER, "tumbler.yaml"),
+                                          {"g": 0.0}))
+    m, d, nq = ref.model, ref.data, ref.model.nq
+
+    def rate(t, y):
+        q, v = y[:nq].copy(), y[nq:]
+        q[3:7] /= np.linalg.norm(q[3:7])
+        qp, vp = ref.q(q), ref.v(v)
+        qdd = ref.ours(pin.aba(m, d, qp, vp, np.zeros(m.nv)))
+        return np.concatenate([_ours_q(ref, pin.tangentMap(m, qp) @ vp), qdd])
+
+    y0 = np.concatenate([TUMBLE_Q0, TUMBLE_V0])
+    sol = solve_ivp(rate, (0.0, 5.0), y0, method="DOP853", rtol=1e-13, atol=1e-13,
+                    t_eval=TUMBLE_T)
+    assert sol.success, sol.message
+    return sol.y[:nq].T
+
+
 @pytest.mark.parametrize("method", ["dopri5", "RK45", "rk4"])
-def test_torque_free_tumbling_keeps_energy_and_a_unit_quaternion(tumbler, method):
-    q0 = tumbler.neutral()
-    v0 = np.array([0.3, 0.0, 0.1, 1.0, 2.0, 0.5, 3.0])
+def test_torque_free_tumbling_keeps_energy_and_a_unit_quaternion(tumbler, tumble_reference,
+                                                                   method):
+    """Energy and a unit quaternion, and the motion itself: the base's orientation and
+    position and the hinge against Pinocchio's tumble (tumble_reference), so a quaternion
+    turned by the angular velocity in the wrong frame (world for body) fails."""
     options = {"h": 1e-3} if method == "rk4" else {"rtol": 1e-10, "atol": 1e-12}
-    result = gagen.simulate(tumbler, (0.0, 5.0), q0, v0, method=method, p={"g": 0.0},
-                            **options)
+    result = gagen.simulate(tumbler, (0.0, 5.0), TUMBLE_Q0, TUMBLE_V0, method=method,
+                            p={"g": 0.0}, **options)
     kinetic = tumbler.energy(result.q, result.qd, p={"g": 0.0})[0]
     assert np.abs(kinetic - kinetic[0]).max() < 1e-8 * kinetic[0]
     assert np.abs(np.linalg.norm(result.q[:, 3:7], axis=1) - 1).max() < 1e-14
     assert result.q.shape == (501, 8) and result.qd.shape == (501, 7)
     assert result.columns()[:3] == ["t", "base_x", "base_y"]
+    np.testing.assert_array_equal(result.t, TUMBLE_T)
     # the body really tumbled: its orientation changed by much more than the tolerance
     assert np.abs(result.q[-1, 3:7] - result.q[0, 3:7]).max() > 0.1
+    want = tumble_reference
+    sign = np.where(np.sum(result.q[:, 3:7] * want[:, 3:7], axis=1) < 0, -1.0, 1.0)
+    orientation = np.abs(result.q[:, 3:7] - sign[:, None] * want[:, 3:7]).max()
+    position = np.abs(result.q[:, [0, 1, 2, 7]] - want[:, [0, 1, 2, 7]]).max()
+    assert orientation < 1e-8 and position < 1e-8, (orientation, position)
 
 
 def test_dopri5_takes_scipy_rk45_steps_with_a_floating_base(tumbler):
