@@ -95,6 +95,36 @@ def test_group_columns_of_a_known_matrix():
     assert g.text() == "a = a + 2*b + d\nc = c - d"
 
 
+def test_base_parameters_at_the_edge_of_identifiability():
+    """A weakly excited column, 1e-6 (relative) from the span of the others, is independent
+    (a base parameter of its own: the smallest singular value of the kept columns is then
+    about 1e-6 of the largest); one 1e-12 from it is dependent and regrouped (base.TOLERANCE
+    = 1e-8 lies between). Columns of very different scales: the test is on unit-norm ones."""
+    rng = np.random.default_rng(17)
+    strong = rng.normal(size=(400, 5)) * [1e3, 1.0, 1e-2, 5.0, 0.3]
+    off_span = np.linalg.qr(np.column_stack([strong, rng.normal(size=(400, 2))]))[0][:, 5:]
+
+    def near_span(coefficients, distance, direction):
+        column = strong @ coefficients
+        return column + distance * np.linalg.norm(column) * direction
+
+    weak = near_span([1e-3, 0.5, -20.0, 0.1, 1.0], 1e-6, off_span[:, 0])
+    dependent = near_span([2e-3, -0.3, 50.0, 0.2, 3.0], 1e-12, off_span[:, 1])
+    names = ["a", "b", "c", "d", "e", "weak", "dependent"]
+    W = np.column_stack([strong, weak, dependent])
+    g = group_columns(W, names)
+    assert g.names == ["a", "b", "c", "d", "e", "weak"]
+    unit = W[:, g.independent] / np.linalg.norm(W[:, g.independent], axis=0)
+    singular = np.linalg.svd(unit, compute_uv=False)
+    assert 1e-7 < singular[-1] / singular[0] < 1e-5
+    # the dependent column is regrouped into the strong ones, with its coefficients
+    np.testing.assert_allclose(g.matrix[:5, 6], [2e-3, -0.3, 50.0, 0.2, 3.0], rtol=1e-6)
+    assert g.matrix[5, 6] == 0
+    pi = rng.normal(size=7)
+    np.testing.assert_allclose(W[:, g.independent] @ (g.matrix @ pi), W @ pi, rtol=1e-9,
+                               atol=1e-9 * np.abs(W @ pi).max())
+
+
 # ----------------------------------------------------------------------- identification
 
 
