@@ -5,9 +5,11 @@ parse, nothing of gagen's shared) for the shared robots, and gagen's Pinocchio b
 (`gagen.reference.pinocchio`) for random floating trees. Checked at random states to
 1e-9 relative: M, forward and inverse dynamics, gravity, energy, integrate, difference,
 every frame's placement, velocity and Jacobian (LOCAL_WORLD_ALIGNED), and aba / rnea with
-external forces. Then the simulations: a torque-free tumbling body keeps its energy and a
-unit quaternion, gagen's dopri5 takes SciPy RK45's steps, and a quadruped standing on four
-feet (contact forces by least squares on the feet's Jacobians) stays still.
+external forces; integrate and difference up to and at a half turn of the base. Then the
+simulations: a torque-free tumbling body keeps its energy and a unit quaternion and turns
+as Pinocchio's own integration of it does, gagen's dopri5 takes SciPy RK45's steps, and a
+quadruped standing on four feet (contact forces by least squares on the feet's Jacobians)
+stays still.
 """
 
 from __future__ import annotations
