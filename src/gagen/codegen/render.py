@@ -41,7 +41,7 @@ COPIED_FILES = ("integrator.c", "integrator.h", "gagen_ode.h", "gagen_second_ord
                 "gagen_math.h", "gagen_api.h")
 # the C files of a model, all compiled into its module (plain C, usable without Python)
 MODEL_C_FILES = ("mass_matrix.c", "rhs.c", "simulation.c", "inverse_dynamics.c", "frames.c",
-                 "regressor.c", "integrator.c")
+                 "regressor.c", "centroidal.c", "integrator.c")
 # the module's one file that speaks to Python: the kernels' table for gagen's runtime
 MODULE_FILE = "module.c"
 _C_KEYWORDS = frozenset({
@@ -815,6 +815,8 @@ def generate(eqs: Equations, module_name: str, key: str,
         "tree": info.bodies,
         "frame_bodies": [body for _, body, _ in info.frames],
         "frame_names": [c_identifier(name) for name, _, _ in info.frames],
+        # the moving bodies for centroidal.c: (body, moving parent, kind, first coordinate)
+        "centroidal": info.moving_tree,
         "ldlt": ldlt_plan(n, zero),
         "zero_fill": zero_fill,
         "blocks": blocks,
@@ -836,6 +838,7 @@ def generate(eqs: Equations, module_name: str, key: str,
         "inverse_dynamics.c": env.get_template("model/inverse_dynamics.c.j2").render(context),
         "frames.c": env.get_template("model/frames.c.j2").render(context),
         "regressor.c": env.get_template("model/regressor.c.j2").render(context),
+        "centroidal.c": env.get_template("model/centroidal.c.j2").render(context),
         MODULE_FILE: env.get_template("model/module.c.j2").render(context),
     }
     kernels_template = env.get_template("model/kernels.c.j2")

@@ -86,6 +86,17 @@ cdef extern from "gagen_api.h" nogil:
         int (*control_torques)(const gagen_control *c, const double *p, long m,
                                const double *t, const double *y,
                                double *tau) noexcept nogil
+        void (*center_of_mass)(const double *q, const double *p, double *com) noexcept nogil
+        void (*com_velocity)(const double *q, const double *qd, const double *p,
+                             double *vcom) noexcept nogil
+        void (*com_jacobian)(const double *q, const double *p, double *J) noexcept nogil
+        void (*centroidal_map)(const double *q, const double *p, double *Ag) noexcept nogil
+        void (*centroidal_momentum)(const double *q, const double *qd, const double *p,
+                                    double *hg) noexcept nogil
+        void (*centroidal_map_time_variation)(const double *q, const double *qd,
+                                              const double *p, double *dAg) noexcept nogil
+        void (*centroidal_bias)(const double *q, const double *qd, const double *p,
+                                double *b) noexcept nogil
     ctypedef struct gagen_derivatives_api:
         int version
         const char *ident
@@ -330,6 +341,26 @@ cdef inline int _call(const gagen_model_api *api, Kernel kernel, const double *a
     return 0
 
 
+cdef inline void _call_centroidal(const gagen_model_api *api, int which, const double *q,
+                                  const double *qd, const double *p,
+                                  double *out) noexcept nogil:
+    """One centroidal kernel (CompiledModel.centroidal's numbering) at one state."""
+    if which == 0:
+        api.center_of_mass(q, p, out)
+    elif which == 1:
+        api.com_velocity(q, qd, p, out)
+    elif which == 2:
+        api.com_jacobian(q, p, out)
+    elif which == 3:
+        api.centroidal_map(q, p, out)
+    elif which == 4:
+        api.centroidal_momentum(q, qd, p, out)
+    elif which == 5:
+        api.centroidal_map_time_variation(q, qd, p, out)
+    else:
+        api.centroidal_bias(q, qd, p, out)
+
+
 cdef class CompiledModel(_Evaluator):
     """The compiled kernels of a model's module, from its capsule `API`;
     `parameter_vector` turns the p= forms other than a float64 array into one,
@@ -467,6 +498,60 @@ cdef class CompiledModel(_Evaluator):
                 else:
                     api.frame_velocity(pa_ + i * sa, pb + i * sb, pp, frame, po + i * nout)
         return out
+
+    cdef object _centroidal(self, int which, object q, object qd, object p):
+        """A centroidal kernel (_call_centroidal's numbering) at one state or stacked
+        states, into a fresh array of its final shape."""
+        cdef const gagen_model_api *api = self.api
+        cdef bint rates = qd is not None
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef cnp.ndarray b = _state(qd, "qd", api.nv) if rates else a
+        cdef list keep = []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(a, -1, "q")
+        if rates:
+            rows = _rows(b, rows, "qd")
+        cdef int height = 3 if which <= 2 else 6
+        cdef bint matrix = which == 2 or which == 3 or which == 5
+        cdef int nout = height * api.nv if matrix else height
+        cdef cnp.ndarray out = _matrices(rows, height, api.nv) if matrix \
+            else _vectors(rows, height)
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *po = _data(out)
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), i, count = rows if rows >= 0 else 1
+        with nogil:
+            for i in range(count):
+                _call_centroidal(api, which, pa_ + i * sa, pb + i * sb, pp, po + i * nout)
+        return out
+
+    def center_of_mass(self, q, p=None):
+        """The centre of mass in the world, (3,) or (N, 3)."""
+        return self._centroidal(0, q, None, p)
+
+    def com_velocity(self, q, qd, p=None):
+        """The centre of mass's velocity, (3,) or (N, 3)."""
+        return self._centroidal(1, q, qd, p)
+
+    def com_jacobian(self, q, p=None):
+        """J_com, (3, nv) or (N, 3, nv): com_velocity = J_com qd."""
+        return self._centroidal(2, q, None, p)
+
+    def centroidal_map(self, q, p=None):
+        """A_g, (6, nv) or (N, 6, nv): h_g = A_g qd."""
+        return self._centroidal(3, q, None, p)
+
+    def centroidal_momentum(self, q, qd, p=None):
+        """h_g, (6,) or (N, 6): linear momentum, angular momentum about the centre of mass."""
+        return self._centroidal(4, q, qd, p)
+
+    def centroidal_map_time_variation(self, q, qd, p=None):
+        """d/dt A_g, (6, nv) or (N, 6, nv)."""
+        return self._centroidal(5, q, qd, p)
+
+    def centroidal_bias(self, q, qd, p=None):
+        """d/dt A_g qd, (6,) or (N, 6): d/dt h_g = A_g qdd + centroidal_bias."""
+        return self._centroidal(6, q, qd, p)
 
     def gravity(self, q, p=None):
         """The gravity torques g(q) = inverse_dynamics(q, 0, 0)."""

@@ -10,6 +10,10 @@ from .frames import frame_index
 
 KERNEL_METHODS = ("mass_matrix", "forcing", "forward_dynamics", "inverse_dynamics",
                   "gravity", "energy", "regressor", "regressor_parameters")
+# the centre of mass and centroidal dynamics (centroidal.c), bound like KERNEL_METHODS
+CENTROIDAL_METHODS = ("center_of_mass", "com_velocity", "com_jacobian", "centroidal_map",
+                      "centroidal_momentum", "centroidal_map_time_variation",
+                      "centroidal_bias")
 # the methods of a model's derivative module (codegen/derivatives.py), bound on first use
 DERIVATIVE_METHODS = ("inverse_dynamics_derivatives", "forward_dynamics_derivatives",
                       "coriolis_matrix", "linearize")
@@ -44,7 +48,7 @@ class CompiledDynamics(Dynamics):
         self.derivative_module = None
         self.kernels = native().CompiledModel(module.API, self.parameter_vector,
                                               self.external_forces)
-        for name in KERNEL_METHODS:
+        for name in KERNEL_METHODS + CENTROIDAL_METHODS:
             setattr(self, name, getattr(self.kernels, name))
 
     # frames: the C of frames.c, one call per state (stacked states in one C loop)

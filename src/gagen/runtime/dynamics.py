@@ -177,6 +177,75 @@ class Dynamics:
         wrenches = external_wrenches(self.info, fext, X.shape[0] if stacked else None)
         return generalized_forces(self.info, X, F, wrenches, self.nv)
 
+    # --- centre of mass and centroidal dynamics (gagen.runtime.centroidal) ------------------
+    # Pinocchio's conventions (centerOfMass, ccrba, dccrba): 6-vectors and the rows of 6 x nv
+    # matrices are linear then angular, in world axes, about the centre of mass. The compiled
+    # backend binds its C kernels (centroidal.c) in their place.
+
+    def center_of_mass(self, q, p=None) -> np.ndarray:
+        """The centre of mass in the world: (3,), or (N, 3) for stacked q. The robot's mass
+        is its moving bodies' (a body welded to the world is left out, as in Pinocchio)."""
+        from . import centroidal
+
+        X, pi = self._centroidal_data(q, None, p)
+        return centroidal.center_of_mass(self.info, X, pi)
+
+    def com_velocity(self, q, qd, p=None) -> np.ndarray:
+        """The centre of mass's velocity in the world, (3,) or (N, 3): com_jacobian(q) @ qd."""
+        from . import centroidal
+
+        X, pi, qd = self._centroidal_data(q, qd, p)
+        return centroidal.com_velocity(self.info, X, pi, qd)
+
+    def com_jacobian(self, q, p=None) -> np.ndarray:
+        """J_com, (3, nv) or (N, 3, nv): com_velocity = J_com qd; the first three rows of
+        centroidal_map over the total mass (Pinocchio's jacobianCenterOfMass)."""
+        from . import centroidal
+
+        X, pi = self._centroidal_data(q, None, p)
+        return centroidal.com_jacobian(self.info, X, pi, self.nv)
+
+    def centroidal_map(self, q, p=None) -> np.ndarray:
+        """A_g, the centroidal momentum matrix, (6, nv) or (N, 6, nv): h_g = A_g qd, at the
+        centre of mass, world axes, linear rows first (Pinocchio's computeCentroidalMap)."""
+        from . import centroidal
+
+        X, pi = self._centroidal_data(q, None, p)
+        return centroidal.centroidal_map(self.info, X, pi, self.nv)
+
+    def centroidal_momentum(self, q, qd, p=None) -> np.ndarray:
+        """h_g, (6,) or (N, 6): the robot's linear momentum, then its angular momentum about
+        the centre of mass, world axes (Pinocchio's computeCentroidalMomentum)."""
+        from . import centroidal
+
+        X, pi, qd = self._centroidal_data(q, qd, p)
+        return centroidal.centroidal_momentum(self.info, X, pi, qd)
+
+    def centroidal_map_time_variation(self, q, qd, p=None) -> np.ndarray:
+        """d/dt A_g, (6, nv) or (N, 6, nv), along the velocity qd (Pinocchio's
+        computeCentroidalMapTimeVariation and dccrba's dAg)."""
+        from . import centroidal
+
+        X, pi, qd = self._centroidal_data(q, qd, p)
+        return centroidal.centroidal_map_time_variation(self.info, X, pi, qd, self.nv)
+
+    def centroidal_bias(self, q, qd, p=None) -> np.ndarray:
+        """d/dt A_g qd, (6,) or (N, 6): the rate of h_g at qdd = 0, so that d/dt h_g =
+        A_g qdd + centroidal_bias (which, by Newton and Euler, equals the external
+        wrenches about the centre of mass plus m g)."""
+        from . import centroidal
+
+        X, pi, qd = self._centroidal_data(q, qd, p)
+        return centroidal.centroidal_bias(self.info, X, pi, qd)
+
+    def _centroidal_data(self, q, qd, p):
+        """The placements and the regressor's parameters at q (and qd checked with it)."""
+        if qd is None:
+            (q,), _ = as_states(self.nq, q, names=("q",))
+            return self._placements(q, p), self.regressor_parameters(p)
+        (q, qd), _ = as_states(self._sizes[:2], q, qd, names=("q", "qd"))
+        return self._placements(q, p), self.regressor_parameters(p), qd
+
     # --- the dynamics (each backend implements these) --------------------------------------
 
     def mass_matrix(self, q, p=None) -> np.ndarray:
