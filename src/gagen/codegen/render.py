@@ -21,6 +21,7 @@ from sympy.printing.precedence import PRECEDENCE, precedence
 
 from .. import __version__
 from ..manifest import FRICTION_WIDTH, QUATERNION_RESTORING, ModelInfo
+from ..symbolic.centroidal import centroidal_program
 from ..symbolic.differentiate import needed_definitions
 from ..symbolic.frames import OFFSET_SIZE, TRANSFORM_SIZE, add_frame_kinematics
 from ..symbolic.gibbs_appell import Equations
@@ -734,6 +735,32 @@ def _regressor_blocks(eqs: Equations, kernels: _Kernels, config: CodegenConfig,
     return blocks
 
 
+# the arrays of the centroidal kernels (their own CSE and printer, as the regressor's)
+CENTROIDAL_ARRAYS = {"center_of_mass": ("q", "p", "com"), "com_jacobian": ("q", "p", "J"),
+                     "centroidal_map": ("q", "p", "Ag")}
+
+
+def _centroidal_blocks(eqs: Equations, kernels: _Kernels, config: CodegenConfig
+                       ) -> dict[str, CodeBlock]:
+    """The centre of mass, J_com and A_g as straight-line code (symbolic/centroidal.py), from
+    a CSE of their own, as the regressor's: the dynamics' kernels stay as they are. Their
+    segment functions, if any, join `kernels`'."""
+    program = centroidal_program(eqs)
+    n = eqs.n
+    outputs = {"center_of_mass": program.center_of_mass,
+               "com_jacobian": program.com_jacobian,
+               "centroidal_map": program.centroidal_map}
+    cse = CSEResult(eqs, kernels.cse.eliminated, program.intermediates, outputs)
+    printer = GagenCPrinter(_symbol_names(eqs, cse), list(eqs.coords.q), config.fast_trig)
+    own = _Kernels(kernels.ident, cse, printer, config, arrays=CENTROIDAL_ARRAYS, looped=())
+    targets = {"center_of_mass": [f"com[{k}]" for k in range(3)],
+               "com_jacobian": [f"J[{k}]" for k in range(3 * n)],
+               "centroidal_map": [f"Ag[{k}]" for k in range(6 * n)]}
+    blocks = {name: own.block(name, cse.outputs[name], targets[name]) for name in outputs}
+    kernels.segments.extend(own.segments)
+    return blocks
+
+
 def model_context(eqs: Equations) -> dict:
     """What every template says about the model: its identifier, sizes, and the names of
     its coordinates and parameters with the defaults."""
@@ -789,6 +816,7 @@ def generate(eqs: Equations, module_name: str, key: str,
         "frame_offsets": kernels.block("frame_offsets", out["frame_offsets"],
                                        [f"F[{k}]" for k in range(len(out["frame_offsets"]))]),
         **_regressor_blocks(eqs, kernels, config, reg, reg_parameters),
+        **_centroidal_blocks(eqs, kernels, config),
     }
     # per body and per frame, the code of one alone: a frame's kinematics then places its
     # path to the world, not every body and every frame

@@ -519,9 +519,12 @@ cdef class CompiledModel(_Evaluator):
         cdef double *pa_ = _data(a)
         cdef double *pb = _data(b)
         cdef double *po = _data(out)
-        cdef Py_ssize_t sa = _step(a), sb = _step(b), i, count = rows if rows >= 0 else 1
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), i
+        if rows < 0:  # one state: releasing the GIL would cost more than the kernel saves
+            _call_centroidal(api, which, pa_, pb, pp, po)
+            return out
         with nogil:
-            for i in range(count):
+            for i in range(rows):
                 _call_centroidal(api, which, pa_ + i * sa, pb + i * sb, pp, po + i * nout)
         return out
 
