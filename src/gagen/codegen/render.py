@@ -735,28 +735,37 @@ def _regressor_blocks(eqs: Equations, kernels: _Kernels, config: CodegenConfig,
     return blocks
 
 
-# the arrays of the centroidal kernels (their own CSE and printer, as the regressor's)
-CENTROIDAL_ARRAYS = {"center_of_mass": ("q", "p", "com"), "com_jacobian": ("q", "p", "J"),
-                     "centroidal_map": ("q", "p", "Ag")}
+# the arrays of the centroidal kernels (their own CSE and printer, as the regressor's): X is
+# the placements, which they read instead of placing the bodies again
+CENTROIDAL_ARRAYS = {"center_of_mass": ("X", "q", "p", "com"),
+                     "centroidal_map": ("X", "q", "p", "Ag"), "robot_mass": ("p", "m")}
 
 
 def _centroidal_blocks(eqs: Equations, kernels: _Kernels, config: CodegenConfig
                        ) -> dict[str, CodeBlock]:
-    """The centre of mass, J_com and A_g as straight-line code (symbolic/centroidal.py), from
-    a CSE of their own, as the regressor's: the dynamics' kernels stay as they are. Their
-    segment functions, if any, join `kernels`'."""
+    """The centre of mass, A_g and the robot's mass as straight-line code
+    (symbolic/centroidal.py) reading the bodies' placements from X, from a CSE of their own
+    as the regressor's: the dynamics' kernels stay as they are. Their segment functions, if
+    any, join `kernels`'."""
     program = centroidal_program(eqs)
-    n = eqs.n
     outputs = {"center_of_mass": program.center_of_mass,
-               "com_jacobian": program.com_jacobian,
-               "centroidal_map": program.centroidal_map}
+               "centroidal_map": program.centroidal_map,
+               "robot_mass": [program.mass]}
     cse = CSEResult(eqs, kernels.cse.eliminated, program.intermediates, outputs)
-    printer = GagenCPrinter(_symbol_names(eqs, cse), list(eqs.coords.q), config.fast_trig)
+    names = _symbol_names(eqs, cse)
+    names.update({symbol: f"x{k}" for symbol, k in program.placements.items()})
+    printer = GagenCPrinter(names, list(eqs.coords.q), config.fast_trig)
     own = _Kernels(kernels.ident, cse, printer, config, arrays=CENTROIDAL_ARRAYS, looped=())
     targets = {"center_of_mass": [f"com[{k}]" for k in range(3)],
-               "com_jacobian": [f"J[{k}]" for k in range(3 * n)],
-               "centroidal_map": [f"Ag[{k}]" for k in range(6 * n)]}
-    blocks = {name: own.block(name, cse.outputs[name], targets[name]) for name in outputs}
+               "centroidal_map": [f"Ag[{k}]" for k in range(6 * eqs.n)],
+               "robot_mass": ["m[0]"]}
+    blocks = {}
+    for name, exprs in cse.outputs.items():
+        needed = cse.needed(exprs)
+        used = set().union(*(a.expr.free_symbols for a in needed),
+                           *(e.free_symbols for e in exprs))
+        reads = {s: f"X[{k}]" for s, k in program.placements.items() if s in used}
+        blocks[name] = own.block(name, exprs, targets[name], externals=reads)
     kernels.segments.extend(own.segments)
     return blocks
 

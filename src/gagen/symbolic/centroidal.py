@@ -9,8 +9,8 @@ ancestors' axes). A_g's column is that momentum in world axes about g:
 
     (R_i f,  R_i n + (p_i - g) x R_i f),      g = sum_i (m_i p_i + R_i h_i) / sum_i m_i
 
-with R_i, p_i the body's placement (`frames`) and (m_i, h_i = m_i c_i) its mass and first
-moment. Bodies joined by fixed joints count as one (`model.merge`), and bodies welded to the
+with R_i, p_i the body's placement (`frames`: read from the placements, which the compiled
+code computes once for all of these) and (m_i, h_i = m_i c_i) its mass and first moment. Bodies joined by fixed joints count as one (`model.merge`), and bodies welded to the
 world are no part of the robot's mass, as in Pinocchio. The composites are taken in the
 bodies' own frames, where a joint's rotation is sparse: the program is O(n) and shares the
 joint transforms with the rest of the model's.
@@ -37,9 +37,12 @@ class CentroidalProgram:
     """The centre of mass (3) and A_g (6 x nv, row-major), written in `intermediates`."""
 
     center_of_mass: list[sp.Expr]
-    com_jacobian: list[sp.Expr]  # A_g's linear rows over the mass (3 x nv)
+    mass: sp.Expr  # of the moving bodies, in the parameters
     centroidal_map: list[sp.Expr]
     intermediates: list[tuple[sp.Symbol, sp.Expr]]
+    # the named entries of `eqs.placements` the outputs read, by their index there: the
+    # program leaves them undefined, to be read from the placements computed once
+    placements: dict[sp.Symbol, int]
 
 
 def centroidal_program(eqs: Equations) -> CentroidalProgram:
@@ -71,10 +74,15 @@ def centroidal_program(eqs: Equations) -> CentroidalProgram:
             columns[column] = (*f_world, *n_world)
     nv = eqs.n
     A = [columns[c][r] for r in range(6) for c in range(nv)]
-    J = [inverse_mass * e for e in A[:3 * nv]]
-    program = needed_definitions(rec.definitions, [*g, *A, *J])
-    return CentroidalProgram(center_of_mass=list(g), com_jacobian=J, centroidal_map=A,
-                             intermediates=program)
+    defined = {symbol for symbol, _ in rec.definitions}
+    read = {e: k for k, e in enumerate(eqs.placements) if e in defined}
+    program = needed_definitions([(s, e) for s, e in rec.definitions if s not in read],
+                                 [*g, *A, mass])
+    used = set().union(*(e.free_symbols for _, e in program), *(e.free_symbols for e in A),
+                       *(e.free_symbols for e in g))
+    return CentroidalProgram(center_of_mass=list(g), mass=mass, centroidal_map=A,
+                             intermediates=program,
+                             placements={s: k for s, k in read.items() if s in used})
 
 
 def _composites(links, rec) -> list[tuple]:
