@@ -231,8 +231,8 @@ class Dynamics:
 
     def centroidal_bias(self, q, qd, p=None) -> np.ndarray:
         """d/dt A_g qd, (6,) or (N, 6): the rate of h_g at qdd = 0, so that d/dt h_g =
-        A_g qdd + centroidal_bias (which, by Newton and Euler, equals the external
-        wrenches about the centre of mass plus m g)."""
+        A_g qdd + centroidal_bias; by Newton and Euler, d/dt h_g is also m g plus the
+        external wrenches about the centre of mass (Pinocchio's dccrba's dAg @ v)."""
         from . import centroidal
 
         X, pi, qd = self._centroidal_data(q, qd, p)
