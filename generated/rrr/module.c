@@ -54,6 +54,13 @@ static const gagen_model_api api = {
     .regressor_parameters = rrr_regressor_parameters,
     .simulate = rrr_simulate,
     .control_torques = rrr_control_torques,
+    .center_of_mass = rrr_center_of_mass,
+    .com_velocity = rrr_com_velocity,
+    .com_jacobian = rrr_com_jacobian,
+    .centroidal_map = rrr_centroidal_map,
+    .centroidal_momentum = rrr_centroidal_momentum,
+    .centroidal_map_time_variation = rrr_centroidal_map_time_variation,
+    .centroidal_bias = rrr_centroidal_bias,
 };
 
 static struct PyModuleDef module_definition = {
@@ -73,7 +80,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "c815c312748dcbccf38561d6fe516835ba656b79f6d5b9d7d061032126d605af") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "f9b086fd875b42b948c832cdc858499deba9e441398943eff83fd6bdee7f6960") < 0) {
         Py_DECREF(module);
         return NULL;
     }
