@@ -240,13 +240,21 @@ def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
               rtol: float = 1e-6, atol: float = 1e-8, step: float = 1e-3,
               threads: int | None = None, scheduler: str | None = None,
               out: str | Path | None = None, cache_dir=None, plot: bool = True,
-              block_runs: int | None = None) -> SweepRun:
+              block_runs: int | None = None, html: bool = False, html_runs=None,
+              html_mode: str = "overlay", package_dirs=None) -> SweepRun:
     """Run `runs` simulations of `model` under the `simulate` command's controller, with the
-    --vary draws; stream them to `out` in blocks; plot the fan and write the statistics."""
+    --vary draws; stream them to `out` in blocks; plot the fan and write the statistics.
+
+    `html` also writes `out`'s stem + .html: the runs `html_runs` (default: the nominal run,
+    then the first HTML_RUNS - 1 runs that reached the end) in 3-D, overlaid with all but
+    the first ghosted, or one after the other (`html_mode` "sequence")."""
     from ..sim.controllers import PD, default_controller
     from ..sim.simulate import simulate
 
     parsed = [parse_variation(text) for text in variations]
+    for i in html_runs or ():
+        if not 0 <= i < runs:
+            raise ValueError(f"--html-runs {i}: there are runs 0 to {runs - 1}")
     model, dyn = load_dynamics(model, "compiled", cache_dir)
     nominal = default_controller(dyn)
     draws = draw_inputs(parsed, runs, dyn, model, nominal, seed)
@@ -276,8 +284,9 @@ def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
              f"block(s) of up to {size:,} runs, to {path}")
     start = time.perf_counter()
     client = _client(scheduler)
+    picked = PickedRuns(html_runs, HTML_RUNS - 1) if html else None
     try:
-        final, fan, failures = _run_blocks(dyn, plan, store, size, threads, client)
+        final, fan, failures = _run_blocks(dyn, plan, store, size, threads, client, picked)
     finally:
         if client is not None:
             client.close()
@@ -293,12 +302,63 @@ def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
         log.info("plotting...")
         run.files.append(fig2_fan(t_eval, fan, nominal_run.q, model,
                                   path.with_name(f"{path.stem}_fan.png"), total=runs))
+    if picked is not None:
+        run.files.append(_write_html(path.with_name(f"{path.stem}.html"), dyn, plan,
+                                     nominal_run, picked, html_runs is None, html_mode,
+                                     package_dirs))
     return run
 
 
-def _run_blocks(dyn, plan: BatchPlan, store, size: int, threads, client):
+HTML_RUNS = 10  # runs the HTML file shows by default (the nominal one and 9 more)
+
+
+class PickedRuns:
+    """The runs the HTML file shows, kept block by block as the sweep goes: the runs
+    `wanted`, or the first `count` runs that reached the end."""
+
+    def __init__(self, wanted, count: int):
+        self.wanted = None if wanted is None else list(dict.fromkeys(wanted))
+        self.count = count
+        self.q: dict[int, np.ndarray] = {}
+
+    def take(self, start: int, res) -> None:
+        if self.wanted is None:
+            for i in np.flatnonzero(res.ok):
+                if len(self.q) >= self.count:
+                    return
+                self.q[start + int(i)] = np.array(res.q[i])
+            return
+        for i in self.wanted:
+            if start <= i < start + len(res.ok):
+                if res.ok[i - start]:
+                    self.q[i] = np.array(res.q[i - start])
+                else:
+                    log.warning(f"--html-runs {i}: the run did not reach the end; left out "
+                                "of the HTML file")
+
+
+def _write_html(path: Path, dyn, plan: BatchPlan, nominal, picked: PickedRuns,
+                with_nominal: bool, mode: str, package_dirs) -> Path:
+    from ..viewer import write_html
+
+    order = [i for i in (picked.wanted or sorted(picked.q)) if i in picked.q]
+    q = [picked.q[i] for i in order]
+    p = [plan.p[0 if plan.p.shape[0] == 1 else i] for i in order]
+    labels = [f"run {i}" for i in order]
+    if with_nominal:
+        q, p, labels = [nominal.q, *q], [nominal.p, *p], ["nominal", *labels]
+    if not q:
+        raise ValueError("--html: none of the chosen runs reached the end")
+    log.info(f"writing the 3-D playback of {len(q)} runs ({path.name})...")
+    return write_html(path, dyn, nominal.t, np.array(q), p, mode=mode, labels=labels,
+                      package_dirs=package_dirs)
+
+
+def _run_blocks(dyn, plan: BatchPlan, store, size: int, threads, client,
+                picked: PickedRuns | None = None):
     """Run the plan block by block into the store: (final q (N, n), NaN for failed runs;
-    the first FAN_RUNS runs' q; the messages of up to FAILURES_KEPT failed runs)."""
+    the first FAN_RUNS runs' q; the messages of up to FAILURES_KEPT failed runs); the
+    runs of the HTML file go to `picked`."""
     runs = plan.runs
     progress = ProgressBar(runs)
     final = np.full((runs, dyn.n), np.nan)
@@ -313,6 +373,8 @@ def _run_blocks(dyn, plan: BatchPlan, store, size: int, threads, client):
             failures[str(a + i)] = res.message[i]
         if fan is None:
             fan = res.q[:FAN_RUNS].copy()
+        if picked is not None:
+            picked.take(a, res)
     return final, fan, failures
 
 

@@ -40,6 +40,16 @@ class Dynamics:
         return model
 
     @property
+    def source(self) -> str:
+        """Where the model was read from: its description's path as given to `gagen.load`
+        (for a given Model, the path it was read from), or a built-in's name. The viewer
+        finds the description's meshes from it."""
+        ref = self._model_ref[0] if isinstance(self._model_ref, tuple) else self._model_ref
+        if ref is None:
+            return self.info.source
+        return str(getattr(ref, "source", ref))
+
+    @property
     def coordinates(self) -> list[str]:
         """The velocity coordinates' names, in the order of qd, qdd and tau (and of q, when
         no joint floats): the moving joints; a floating joint's six first among its own,

@@ -317,6 +317,9 @@ class BatchResult:
     rejected: np.ndarray
     coordinates: list[str]
     stats: dict = field(default_factory=dict)
+    # the dynamics object and the parameter table (N or 1 rows) of the runs
+    dyn: object = field(default=None, repr=False, compare=False)
+    p: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.status)
@@ -331,8 +334,32 @@ class BatchResult:
         stats = {"method": self.stats.get("method"), "backend": self.stats.get("backend"),
                  "nfev": int(self.nfev[i]), "steps": int(self.steps[i]),
                  "rejected": int(self.rejected[i]), "message": self.message[i]}
+        nq = self.q.shape[-1]
         return SimulationResult(self.t.copy(), np.array(self.q[i]), np.array(self.qd[i]),
-                                np.array(self.tau[i]), list(self.coordinates), stats)
+                                np.array(self.tau[i]), list(self.coordinates), stats,
+                                None if nq == len(self.coordinates) else
+                                list(getattr(self.dyn, "configuration", [])) or None,
+                                dyn=self.dyn, p=self._parameters(i))
+
+    def _parameters(self, i: int) -> np.ndarray | None:
+        if self.p is None:
+            return None
+        return np.array(self.p[0 if self.p.shape[0] == 1 else i])
+
+    def to_html(self, path, runs=None, mode: str = "overlay", package_dirs=None):
+        """One self-contained HTML file that plays chosen runs back in 3-D (needs
+        `pip install gagen[viewer]`): `runs` (indices; default the first 10 that reached
+        the end) drawn together, the first opaque and the others ghosted (`mode="overlay"`),
+        or one after the other, labelled (`mode="sequence"`). Each run is placed with its
+        own parameters. Returns the path (gagen.viewer.write_html)."""
+        if self.dyn is None:
+            raise ValueError("this batch has no dynamics object (dyn)")
+        chosen = chosen_runs(self.ok, runs)
+        from ..viewer import write_html
+
+        return write_html(path, self.dyn, self.t, self.q[chosen],
+                          [self._parameters(i) for i in chosen], package_dirs=package_dirs,
+                          mode=mode, labels=[f"run {i}" for i in chosen])
 
     def __repr__(self) -> str:
         return (f"<BatchResult {len(self)} runs ({int((~self.ok).sum())} failed), "
@@ -354,7 +381,30 @@ def batch_result(dyn, plan: BatchPlan, q, qd, tau, stats: np.ndarray,
                        stats[:, NFEV].copy(), stats[:, NACCEPTED].copy(),
                        stats[:, NREJECTED].copy(), list(dyn.coordinates),
                        {"method": s.method, "backend": dyn.backend, "runs": len(status),
-                        "failed": int(np.count_nonzero(status))})
+                        "failed": int(np.count_nonzero(status))}, dyn=dyn, p=plan.p)
+
+
+HTML_RUNS = 10  # runs a batch's HTML file shows by default
+
+
+def chosen_runs(ok: np.ndarray, runs=None) -> list[int]:
+    """The runs to draw: `runs` (indices, each of a run that reached the end), or the first
+    HTML_RUNS that did."""
+    if runs is None:
+        chosen = [int(i) for i in np.flatnonzero(ok)[:HTML_RUNS]]
+        if not chosen:
+            raise ValueError("no run reached the end: nothing to draw")
+        return chosen
+    chosen = [int(i) for i in np.atleast_1d(runs)]
+    for i in chosen:
+        if not 0 <= i < len(ok):
+            raise ValueError(f"run {i} is not one of the {len(ok)} runs")
+        if not ok[i]:
+            raise ValueError(f"run {i} did not reach the end (its samples stop): choose "
+                             "another")
+    if not chosen:
+        raise ValueError("runs is empty")
+    return chosen
 
 
 def simulate_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: str = "dopri5",

@@ -72,6 +72,10 @@ class SimulationResult:
     coordinates: list[str]
     stats: dict = field(default_factory=dict)
     configuration: list[str] | None = None  # the names of q's entries, if not coordinates
+    # the dynamics object and parameter vector of the run (set by gagen.simulate), which
+    # to_html draws the robot with
+    dyn: object = field(default=None, repr=False, compare=False)
+    p: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def n(self) -> int:
@@ -93,6 +97,19 @@ class SimulationResult:
             writer.writerow(self.columns())
             writer.writerows([repr(float(v)) for v in row] for row in data)
         return path
+
+    def to_html(self, path, package_dirs=None) -> Path:
+        """Write one self-contained HTML file that plays the run back in 3-D: the robot with
+        its meshes (a URDF's, found through `package_dirs` and $ROS_PACKAGE_PATH; MJCF
+        geoms; inertia boxes for models without), a time slider, play/pause and speed.
+        It plays offline in any current browser and fetches nothing. Needs
+        `pip install gagen[viewer]` (gagen.viewer.write_html). Returns the path."""
+        if self.dyn is None:
+            raise ValueError("this result has no dynamics object (dyn): made by hand? "
+                             "gagen.viewer.write_html(path, dyn, t, q) draws any run")
+        from ..viewer import write_html
+
+        return write_html(path, self.dyn, self.t, self.q, self.p, package_dirs=package_dirs)
 
     def __repr__(self) -> str:
         return (f"<SimulationResult {len(self.t)} samples, t in [{self.t[0]:g}, {self.t[-1]:g}], "
@@ -229,10 +246,13 @@ def simulate(dyn, t_span, q0, qd0=None, controller=None, method: str = "RK45",
                         "(t, q, qd) -> tau")
     wrenches = constant_wrenches(dyn, fext)
     if isinstance(method, str) and method in COMPILED_METHODS:
-        return _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol_arr,
-                                  t_eval, pvec, options, wrenches)
-    return _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol_arr, t_eval,
-                           pvec, options, wrenches)
+        result = _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol_arr,
+                                    t_eval, pvec, options, wrenches)
+    else:
+        result = _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol_arr,
+                                 t_eval, pvec, options, wrenches)
+    result.dyn, result.p = dyn, pvec
+    return result
 
 
 def constant_wrenches(dyn, fext) -> tuple[np.ndarray, np.ndarray] | None:
