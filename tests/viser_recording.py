@@ -34,6 +34,9 @@ class Recording:
             kind, name = message.get("type", ""), message.get("name")
             if name is None:
                 continue
+            if kind in ("SetPositionMessage", "SetOrientationMessage",
+                        "SetSceneNodeVisibilityMessage") and name not in nodes:
+                continue  # a node viser made itself (the root, the world axes)
             if kind == "SetPositionMessage":
                 nodes[name]["position"] = np.array(message["position"], dtype=float)
             elif kind == "SetOrientationMessage":

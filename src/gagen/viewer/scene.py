@@ -86,19 +86,20 @@ class MeshLibrary:
     _glb: dict = field(default_factory=dict)
     _textures: dict = field(default_factory=dict)
 
-    def glb(self, visual: Visual, ghost: float | None = None) -> bytes | None:
-        """The GLB of a visual (its fallback where its mesh cannot be read, with a
-        MeshWarning), or None when nothing can be drawn."""
+    def glb(self, visual: Visual, ghost: float | None = None
+            ) -> tuple[bytes, Visual] | tuple[None, None]:
+        """(GLB, the visual drawn): the visual, or its fallback where its mesh cannot be
+        read (with a MeshWarning); (None, None) when nothing can be drawn."""
         try:
-            return self._glb_of(visual, ghost)
+            return self._glb_of(visual, ghost), visual
         except MeshRefused as exc:
             if visual.fallback is None:
                 self._warn(f"link {visual.link!r}: mesh {visual.shape.uri!r}: {exc}; "
                            "not drawn (the link has no inertia to draw instead)")
-                return None
+                return None, None
             self._warn(f"link {visual.link!r}: mesh {visual.shape.uri!r}: {exc}; drawn as "
                        "the link's inertia box instead")
-            return self._glb_of(visual.fallback, ghost)
+            return self._glb_of(visual.fallback, ghost), visual.fallback
 
     def _warn(self, message: str) -> None:
         if message not in self._glb:  # once per message, though drawn for several runs
@@ -299,7 +300,7 @@ class RobotScene:
         drawn = 0
         for visual in visuals.visuals:
             parent = self.link_nodes.get(visual.frame, self.world_node)
-            glb = library.glb(visual, ghost)
+            glb, visual = library.glb(visual, ghost)
             if glb is None:
                 continue
             k = counts[parent] = counts.get(parent, 0) + 1
