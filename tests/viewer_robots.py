@@ -63,7 +63,7 @@ def toy_urdf(base_mesh: str = "package://toy_description/meshes/base.stl",
     </visual>
   </link>
   <joint name="tool_mount" type="fixed"><parent link="forearm"/><child link="tool"/>
-    <origin xyz="0.3 0 0" rpy="0.1 0.2 0.3"/></joint>
+    <origin xyz="0.3 0.02 0.01" rpy="0.1 0.2 0.3"/></joint>
   <link name="tool">
     {inertial(0.1, "0 0 0.02", 0.001)}
     <visual><origin xyz="0 0 0.03" rpy="0.5 0 0"/>
