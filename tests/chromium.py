@@ -25,7 +25,8 @@ _FLAGS = ("--headless=new", "--no-sandbox", "--disable-gpu", "--use-angle=swifts
           "--enable-unsafe-swiftshader", "--no-first-run", "--no-default-browser-check",
           "--disable-extensions", "--disable-background-networking", "--disable-sync",
           "--mute-audio", "--host-resolver-rules=MAP * ~NOTFOUND",
-          "--remote-debugging-port=0", "--window-size=1024,700")
+          "--remote-debugging-port=0")
+WINDOW = (1024, 700)
 LOCAL_SCHEMES = ("file:", "data:", "blob:", "about:", "chrome:", "devtools:")
 
 
@@ -44,7 +45,8 @@ def chromium_path() -> str | None:
 class Browser:
     """One headless Chromium with one page; use as a context manager."""
 
-    def __init__(self, executable: str | None = None, timeout: float = 30.0):
+    def __init__(self, executable: str | None = None, timeout: float = 30.0,
+                 window: tuple[int, int] = WINDOW):
         from websockets.sync.client import connect
 
         self.profile = Path(tempfile.mkdtemp(prefix="gagen-chromium-"))
@@ -52,6 +54,7 @@ class Browser:
         if exe is None:
             raise RuntimeError("no Chromium found")
         self.process = subprocess.Popen([exe, *_FLAGS, f"--user-data-dir={self.profile}",
+                                         f"--window-size={window[0]},{window[1]}",
                                          "about:blank"], stdout=subprocess.DEVNULL,
                                         stderr=subprocess.DEVNULL)
         port = self._devtools_port(timeout)

@@ -21,19 +21,20 @@ pytest.importorskip("viser")
 pytest.importorskip("trimesh")
 pytest.importorskip("collada")
 
-import gagen  # noqa: E402
-from gagen.viewer import MeshWarning, read_run, start_viewer, write_html  # noqa: E402
-from gagen.viewer import html as viewer_html  # noqa: E402
-from gagen.viewer.meshes import (  # noqa: E402
+from viewer_robots import swing, toy_robot, toy_urdf
+from viser_recording import read_recording
+
+import gagen
+from gagen.viewer import MeshWarning, read_run, start_viewer, write_html
+from gagen.viewer import html as viewer_html
+from gagen.viewer.meshes import (
     MeshBudget,
     MeshFinder,
     MeshRefused,
     read_mesh,
 )
-from gagen.viewer.placements import body_names  # noqa: E402
-from gagen.viewer.visuals import mjcf_visuals, robot_visuals, urdf_visuals  # noqa: E402
-from viewer_robots import swing, toy_robot, toy_urdf  # noqa: E402
-from viser_recording import read_recording, rotation  # noqa: E402
+from gagen.viewer.placements import body_names
+from gagen.viewer.visuals import mjcf_visuals, robot_visuals, urdf_visuals
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -71,7 +72,7 @@ def drawn_links(recording, dyn, time_: float) -> dict[str, tuple[np.ndarray, np.
 
 @pytest.mark.parametrize("which", ["fixed", "floating"])
 def test_drawn_placements_equal_frame_placement(which, toy, floating_toy, tmp_path):
-    urdf, packages, dyn = toy if which == "fixed" else floating_toy
+    _, packages, dyn = toy if which == "fixed" else floating_toy
     t = np.linspace(0.0, 2.0, 41)
     q = swing(dyn, t)
     path = write_html(tmp_path / "run.html", dyn, t, q, package_dirs=[packages])
@@ -127,7 +128,7 @@ def test_visuals_drawn_where_pinocchio_places_them(which, toy, floating_toy, tmp
         nodes = recording.at(t[i])
         for k, geometry in enumerate(visual.geometryObjects):
             link, ordinal = geometry.name.rsplit("_", 1)
-            node = [n for n in nodes if n.count("/") == 3 and n.endswith(f"/{link}")][0]
+            node = next(n for n in nodes if n.count("/") == 3 and n.endswith(f"/{link}"))
             R, p = recording.world_pose(nodes, f"{node}/visual_{int(ordinal) + 1}")
             np.testing.assert_allclose(R, vdata.oMg[k].rotation, atol=1e-9, err_msg=geometry.name)
             np.testing.assert_allclose(p, vdata.oMg[k].translation, atol=1e-9,
@@ -289,8 +290,8 @@ def test_a_2_gb_mesh_is_refused_before_it_is_read(tmp_path, monkeypatch):
      "malformed STL|no triangles"),
     ("empty.stl", b"", "malformed STL|no triangles"),
     ("text.stl", b"solid x\nfacet nonsense\n", "malformed STL|no triangles"),
-    ("bomb.dae", b'<?xml version="1.0"?><!DOCTYPE c [<!ENTITY a "aaaa">]><COLLADA>&a;'
-                 b"</COLLADA>", "must not declare a DTD"),
+    ("bomb.dae", (b'<?xml version="1.0"?><!DOCTYPE c [<!ENTITY a "aaaa">]><COLLADA>&a;'
+                  b"</COLLADA>"), "must not declare a DTD"),
     ("broken.dae", b"<COLLADA><library_geometries>", "malformed XML"),
     ("model.ply", b"ply\n", "STL, OBJ and COLLADA"),
 ])
@@ -346,7 +347,7 @@ def test_files_a_mesh_refers_to_stay_in_its_folder(tmp_path):
 
 
 def test_a_missing_mesh_warns_and_draws_the_inertia_box(toy, tmp_path):
-    urdf, packages, dyn = toy
+    urdf, packages, _ = toy
     broken = urdf.with_name("broken.urdf")
     broken.write_text(toy_urdf(base_mesh="package://toy_description/meshes/gone.stl"))
     missing = gagen.load(broken)
@@ -376,7 +377,7 @@ def test_bad_visual_elements_warn_and_fall_back(toy):
 # --- the HTML file ---------------------------------------------------------------------------
 
 def test_html_is_self_contained_and_written_whole(toy, tmp_path, monkeypatch):
-    urdf, packages, dyn = toy
+    _, packages, dyn = toy
     t = np.linspace(0, 1, 11)
     path = write_html(tmp_path / "deep" / "r.html", dyn, t, swing(dyn, t),
                       package_dirs=[packages])
@@ -460,7 +461,7 @@ def test_sweep_overlay_and_sequence(tmp_path):
     overlay = read_recording(batch.to_html(tmp_path / "o.html", runs=[2, 0]))
     nodes = overlay.at(0.5)
     for k, run in enumerate((2, 0)):
-        R, p = overlay.world_pose(nodes, f"/gagen/run_{k}/link2")
+        _, p = overlay.world_pose(nodes, f"/gagen/run_{k}/link2")
         np.testing.assert_allclose(p, dyn.frame_placement(batch.q[run, -1], "link2",
                                                           {"L1": lengths[run]})[1], atol=1e-12)
     glbs = {m["name"]: m for _, m in overlay.messages if m["type"] == "GlbMessage"}
@@ -539,7 +540,7 @@ def test_live_viewer_serves_the_scene_and_plays_a_run(toy):
             n.replace("forearm/tool", "tool/tool") for n in names} | names
         viewer.advance(0.55)  # playing from the start: at the sample of t = 0.5
         np.testing.assert_allclose(viewer.q, q[5])
-        R, p = dyn.frame_placement(q[5], "forearm")
+        _, p = dyn.frame_placement(q[5], "forearm")
         body = body_names(dyn).index("forearm")
         np.testing.assert_allclose(viewer.robot.handles[body].position, p, atol=1e-12)
         viewer.pause()
@@ -578,7 +579,7 @@ def test_view_command_serves_until_interrupted(toy, tmp_path):
         assert any("visual" in n for n in _scene_names(int(url.rsplit(":", 1)[1])))
     finally:
         process.send_signal(2)  # Ctrl-C
-        out, err = process.communicate(timeout=30)
+        _, err = process.communicate(timeout=30)
     assert process.returncode == 0, err
     assert "viewer stopped" in err
 

@@ -18,11 +18,11 @@ pytest.importorskip("trimesh")
 pytest.importorskip("collada")
 pytest.importorskip("websockets")
 
-from chromium import Browser, chromium_path  # noqa: E402
+from chromium import Browser, chromium_path
+from viewer_robots import swing, toy_robot
 
-import gagen  # noqa: E402
-from gagen.viewer import write_html  # noqa: E402
-from viewer_robots import swing, toy_robot  # noqa: E402
+import gagen
+from gagen.viewer import write_html
 
 pytestmark = [pytest.mark.browser,
               pytest.mark.skipif(chromium_path() is None, reason="no Chromium installed "
@@ -51,12 +51,16 @@ def canvas_shot(browser: Browser) -> np.ndarray:
                            ".getBoundingClientRect(); return [r.left, r.top, r.right, "
                            "r.bottom]; })()")
     image = np.asarray(browser.screenshot())
-    left, top, right, bottom = (int(round(v)) for v in box)
+    left, top, right, bottom = (round(v) for v in box)
     return image[top:bottom, left:right]
 
 
 def at_time(browser: Browser, seconds: float, settle: float = 1.0) -> np.ndarray:
-    browser.type_into(TIME_INPUT, f"{seconds:g}")  # pauses the playback there
+    # typing a time pauses the playback there; typed twice, since the first keystrokes
+    # may race the running clock's own updates of the field
+    browser.type_into(TIME_INPUT, f"{seconds:g}")
+    browser.pump(0.2)
+    browser.type_into(TIME_INPUT, f"{seconds:g}")
     browser.pump(settle)
     return canvas_shot(browser)
 

@@ -171,9 +171,9 @@ def _label_runs(server, scenes, runs, labels) -> None:
 def add_ground(server, scene: RobotScene, q) -> None:
     """A grid on the world's xy-plane (z = 0), 10 cm cells, around the robot."""
     origin, _ = scene.pose_arrays(np.atleast_2d(q))
-    extent = float(np.abs(origin[0][:, :2]).max()) + 1.0
+    extent = float(np.abs(origin[0][:, :2]).max()) + 0.5
     size = 2.0 * math.ceil(extent)
-    server.scene.add_grid("/ground", width=size, height=size, cell_size=0.1, section_size=1.0,
+    server.scene.add_grid("/ground", width=size, height=size, cell_size=0.1, section_size=0.5,
                           plane="xy")
 
 
@@ -186,7 +186,7 @@ def aim_camera(server, scene: RobotScene, q) -> None:
     direction = np.array([1.3, -1.6, 0.9])
     direction /= np.linalg.norm(direction)
     server.initial_camera.look_at = tuple(float(v) for v in centre)
-    server.initial_camera.position = tuple(float(v) for v in centre + 2.6 * radius * direction)
+    server.initial_camera.position = tuple(float(v) for v in centre + 2.2 * radius * direction)
 
 
 class PoseRecorder:
