@@ -553,6 +553,41 @@ def test_live_viewer_serves_the_scene_and_plays_a_run(toy):
         urllib.request.urlopen(viewer.url, timeout=2)
 
 
+def test_floating_base_sliders_set_position_and_orientation(floating_toy):
+    _, packages, dyn = floating_toy
+    viewer = start_viewer(dyn, package_dirs=[packages], port=0)
+    try:
+        values = {"root_joint x (m)": 0.3, "root_joint z (m)": -0.2, "root_joint roll (rad)": 0.4,
+                  "root_joint yaw (rad)": -1.1, "j2 (rad)": 0.7}
+        for slider, _ in viewer.sliders:
+            slider.value = values.get(slider.label, slider.value)
+        q = viewer._configuration_from_sliders()
+        names = dyn.configuration
+        assert q[names.index("root_joint_x")] == 0.3 and q[names.index("j2")] == 0.7
+        R, p = dyn.frame_placement(q, "base_link")
+        from gagen.viewer.visuals import rotation_rpy
+
+        np.testing.assert_allclose(R, rotation_rpy(0.4, 0.0, -1.1), atol=1e-12)
+        np.testing.assert_allclose(p, [0.3, 0.0, -0.2], atol=1e-12)
+    finally:
+        viewer.stop()
+
+
+def test_without_the_extra_the_viewer_says_what_to_install(toy, monkeypatch, tmp_path):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "viser" else real(name, *a))
+    _, _, dyn = toy
+    with pytest.raises(ImportError,
+                       match=r"the viewer needs viser: pip install 'gagen\[viewer\]'"):
+        write_html(tmp_path / "x.html", dyn, [0.0], dyn.neutral()[None])
+    res = gagen.simulate(dyn, (0, 0.1), dyn.neutral(), method="rk4")
+    with pytest.raises(ImportError, match="gagen\\[viewer\\]"):
+        res.to_html(tmp_path / "x.html")
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -640,7 +640,7 @@ def _exit_code(exc: BaseException) -> int | None:
     from ..runtime.dynamics import SingularMassMatrixError
 
     if isinstance(exc, (BuildError, SingularMassMatrixError, NonFiniteStateError, OSError,
-                        RuntimeError)):
+                        RuntimeError, ImportError)):  # ImportError: an extra to install
         return 1
     if isinstance(exc, (ModelError, ValueError, TypeError, KeyError)):
         return 2
