@@ -85,6 +85,7 @@ class MeshLibrary:
     _meshes: dict = field(default_factory=dict)  # uri -> trimesh.Scene or MeshRefused
     _glb: dict = field(default_factory=dict)
     _textures: dict = field(default_factory=dict)
+    _warned: set = field(default_factory=set)
 
     def glb(self, visual: Visual, ghost: float | None = None
             ) -> tuple[bytes, Visual] | tuple[None, None]:
@@ -102,8 +103,8 @@ class MeshLibrary:
             return self._glb_of(visual.fallback, ghost), visual.fallback
 
     def _warn(self, message: str) -> None:
-        if message not in self._glb:  # once per message, though drawn for several runs
-            self._glb[message] = None
+        if message not in self._warned:  # once, though the robot is drawn for several runs
+            self._warned.add(message)
             warnings.warn(message, MeshWarning, stacklevel=4)
 
     def _glb_of(self, visual: Visual, ghost: float | None) -> bytes:
