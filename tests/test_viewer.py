@@ -6,6 +6,7 @@ sweeps overlaid or in sequence; the live viewer's server; the CLI's --html and v
 from __future__ import annotations
 
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -391,6 +392,30 @@ def test_html_is_self_contained_and_written_whole(toy, tmp_path, monkeypatch):
     with pytest.raises(ZeroDivisionError):
         write_html(tmp_path / "none.html", dyn, t, swing(dyn, t), package_dirs=[packages])
     assert sorted(p.name for p in tmp_path.iterdir()) == ["deep"]
+
+
+def test_names_inside_mesh_files_stay_out_of_the_page(toy, tmp_path):
+    """A mesh file's node, geometry and material names are text from a description: the
+    page's glTF carries numbered names instead."""
+    import trimesh
+
+    urdf, packages, _ = toy
+    box = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    dae = trimesh.exchange.dae.export_collada(box)
+    for k, token in enumerate(sorted(set(re.findall(rb'"([0-9a-f]{32})"', dae)))):
+        dae = dae.replace(token, b"SECRET_NAME_42_%d" % k)  # ids and names alike
+    assert b'name="SECRET_NAME_42' in dae
+    (tmp_path / "named.dae").write_bytes(dae)
+    named = urdf.with_name("named.urdf")
+    named.write_text(toy_urdf(base_mesh=str(tmp_path / "named.dae")))
+    dyn = gagen.load(named)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MeshWarning)
+        path = write_html(tmp_path / "n.html", dyn, [0.0], dyn.neutral()[None],
+                          package_dirs=[packages, tmp_path])
+    glbs = [bytes(m["props"]["glb_data"]) for _, m in read_recording(path).messages
+            if m["type"] == "GlbMessage"]
+    assert len(glbs) == 6 and not any(b"SECRET_NAME_42" in glb for glb in glbs)
 
 
 def test_html_input_checks(toy, tmp_path):

@@ -161,9 +161,11 @@ def _export(scene, rgba, ghost: float | None, textures: dict) -> bytes:
     down, translucent for a ghost (the scene itself is left as it is)."""
     import trimesh
 
-    out = trimesh.Scene(base_frame=scene.graph.base_frame)
-    made: dict[str, trimesh.Trimesh] = {}
-    for node in scene.graph.nodes_geometry:
+    # The mesh file's own names (of nodes, meshes, materials) stay out of the page: the
+    # glTF gets numbered ones.
+    out = trimesh.Scene(base_frame="root")
+    made: dict[str, tuple[str, trimesh.Trimesh]] = {}
+    for k, node in enumerate(scene.graph.nodes_geometry):
         transform, name = scene.graph[node]
         geometry = scene.geometry.get(name)
         if not isinstance(geometry, trimesh.Trimesh) or len(geometry.faces) == 0:
@@ -172,10 +174,12 @@ def _export(scene, rgba, ghost: float | None, textures: dict) -> bytes:
             material = _material(geometry, rgba, textures)
             if ghost is not None:
                 material = _ghosted(material, ghost)
-            made[name] = trimesh.Trimesh(geometry.vertices, geometry.faces,
-                                         visual=_visual_with(geometry, material),
-                                         process=False)
-        out.add_geometry(made[name], node_name=node, geom_name=name, transform=transform)
+            material.name = f"material{len(made)}"
+            made[name] = (f"mesh{len(made)}", trimesh.Trimesh(
+                geometry.vertices, geometry.faces, visual=_visual_with(geometry, material),
+                process=False))
+        geom_name, mesh = made[name]
+        out.add_geometry(mesh, node_name=f"node{k}", geom_name=geom_name, transform=transform)
     if not out.geometry:
         raise MeshRefused("no triangles to draw")
     return out.export(file_type="glb")
