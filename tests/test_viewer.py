@@ -35,7 +35,8 @@ from gagen.viewer.meshes import (
     read_mesh,
 )
 from gagen.viewer.placements import body_names
-from gagen.viewer.visuals import mjcf_visuals, robot_visuals, urdf_visuals
+from gagen.viewer.scene import safe_name
+from gagen.viewer.visuals import link_frame, mjcf_visuals, robot_visuals, urdf_visuals
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -62,13 +63,20 @@ def link_frames(dyn) -> list[str]:
 def drawn_links(recording, dyn, time_: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Each link frame's world placement as the file draws it at `time_`."""
     nodes = recording.at(time_)
+    frames = {safe_name(frame): frame for frame in link_frames(dyn)}
     out = {}
     for name in nodes:
         leaf = name.rsplit("/", 1)[-1]
-        if nodes[name]["type"] == "FrameMessage" and leaf in link_frames(dyn) \
-                and name.count("/") == 3:
-            out[leaf] = recording.world_pose(nodes, name)
+        if nodes[name]["type"] == "FrameMessage" and leaf in frames and name.count("/") == 3:
+            out[frames[leaf]] = recording.world_pose(nodes, name)
     return out
+
+
+def visual_node(nodes: dict, dyn, link: str, ordinal: int) -> str:
+    """The node of a URDF link's visual (its frame named as dyn.frames names it)."""
+    leaf = safe_name(link_frame(dyn, link))
+    parent = next(n for n in nodes if n.count("/") == 3 and n.endswith(f"/{leaf}"))
+    return f"{parent}/visual_{ordinal + 1}"
 
 
 @pytest.mark.parametrize("which", ["fixed", "floating"])
@@ -129,8 +137,7 @@ def test_visuals_drawn_where_pinocchio_places_them(which, toy, floating_toy, tmp
         nodes = recording.at(t[i])
         for k, geometry in enumerate(visual.geometryObjects):
             link, ordinal = geometry.name.rsplit("_", 1)
-            node = next(n for n in nodes if n.count("/") == 3 and n.endswith(f"/{link}"))
-            R, p = recording.world_pose(nodes, f"{node}/visual_{int(ordinal) + 1}")
+            R, p = recording.world_pose(nodes, visual_node(nodes, dyn, link, int(ordinal)))
             np.testing.assert_allclose(R, vdata.oMg[k].rotation, atol=1e-9, err_msg=geometry.name)
             np.testing.assert_allclose(p, vdata.oMg[k].translation, atol=1e-9,
                                        err_msg=geometry.name)
@@ -663,3 +670,56 @@ def test_simulate_and_sweep_write_html(toy, tmp_path):
     names = {m["name"].split("/")[2] for _, m in read_recording(tmp_path / "w" / "sw.html")
              .messages if m.get("type") == "GlbMessage"}
     assert names == {"run_0", "run_1"}
+
+
+# --- real robots (example-robot-data's meshes, where it is installed) -------------------------
+
+def robot_data() -> Path | None:
+    """example-robot-data's `share` folder (the package of package://example-robot-data/)."""
+    for root in {sys.prefix, sys.base_prefix}:
+        for found in Path(root).glob("lib/python3*/site-packages/cmeel.prefix/share"):
+            if (found / "example-robot-data" / "robots").is_dir():
+                return found
+    return None
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(robot_data() is None, reason="example-robot-data is not installed "
+                    "(pip install example-robot-data)")
+@pytest.mark.parametrize("robot, floating", [
+    ("anymal_c_simple_description/urdf/anymal.urdf", True),
+    ("panda_description/urdf/panda.urdf", False)])
+def test_real_robots_meshes_drawn_where_pinocchio_places_them(robot, floating, tmp_path):
+    """ANYmal C (textured COLLADA) and the Panda: every visual read (no MeshWarning) and
+    drawn where Pinocchio's visual model places it; ANYmal's 10-s, 1,001-sample file is
+    under 10 MB."""
+    share = robot_data()
+    urdf = share / "example-robot-data" / "robots" / robot
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gagen.InertiaWarning)
+        dyn = gagen.load(urdf, floating_base=floating)
+    t = np.linspace(0.0, 10.0, 1001)
+    q = np.tile(dyn.neutral(), (len(t), 1))
+    rng = np.random.default_rng(0)
+    joints = [k for k, name in enumerate(dyn.configuration) if not name.startswith("root")]
+    q[:, joints] = 0.5 * np.sin(np.outer(t, rng.uniform(0.2, 1.0, len(joints))))
+    if floating:
+        q[:, :3] = np.column_stack([0.1 * t, np.sin(t), 0.2 * np.cos(t)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MeshWarning)
+        path = write_html(tmp_path / "robot.html", dyn, t, q, package_dirs=[share])
+    assert path.stat().st_size < 10 * 2**20
+    pin, model, visual = pinocchio_visuals(urdf, share, floating)
+    data, vdata = model.createData(), visual.createData()
+    recording = read_recording(path)
+    glbs = [m for _, m in recording.messages if m["type"] == "GlbMessage"]
+    assert len(glbs) == len(visual.geometryObjects)
+    for i in (0, 500, 1000):
+        pin.forwardKinematics(model, data, pinocchio_configuration(model, dyn, q[i]))
+        pin.updateGeometryPlacements(model, data, visual, vdata)
+        nodes = recording.at(t[i])
+        for k, geometry in enumerate(visual.geometryObjects):
+            link, ordinal = geometry.name.rsplit("_", 1)
+            R, p = recording.world_pose(nodes, visual_node(nodes, dyn, link, int(ordinal)))
+            np.testing.assert_allclose(R, vdata.oMg[k].rotation, atol=1e-9)
+            np.testing.assert_allclose(p, vdata.oMg[k].translation, atol=1e-9)
