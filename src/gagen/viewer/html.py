@@ -6,7 +6,8 @@ loader inlined, no CDN), and `StateSerializer.as_html()` embeds a scene recordin
 from a file, with a time slider, play/pause and speed (0.5x-8x), and fetches nothing.
 meshcat's `static_html` also inlines its three.js bundle, but its animations are three.js
 clips of the whole scene state per frame and its Python package has not had a release
-since November 2021 (0.3.2); viser is maintained and is also the live viewer (`gagen.viewer.live`).
+since November 2021 (0.3.2); viser is maintained and is also the live viewer
+(`gagen.viewer.live`).
 
 The file is written by building the robot in a viser server bound to 127.0.0.1 (on a free
 port, no client ever connects), recording a pose message per moving body per sample,
