@@ -74,8 +74,11 @@ def compile_mjcf(path: str | Path):
     try:
         with _warnings_collected(mujoco, notes):
             mj = mujoco.MjModel.from_xml_path(source)
-    except (ValueError, RuntimeError, mujoco.FatalError) as exc:
-        raise ModelError(source, "MuJoCo's compiler", _shortened(str(exc))) from None
+    except MemoryError:
+        raise ModelError(source, "MuJoCo's compiler", "ran out of memory compiling the "
+                         "model") from None
+    except Exception as exc:  # noqa: BLE001 - every error of MuJoCo's is the file's
+        raise ModelError(source, "MuJoCo's compiler", _compile_error(exc)) from None
     for note in notes:
         warnings.warn(one_line(f"{source}: MuJoCo's compiler: {_shortened(note)}"),
                       stacklevel=2)
@@ -95,6 +98,16 @@ def _warnings_collected(mujoco, into: list[str]):
         yield
     finally:
         mujoco.set_mju_user_warning(previous)
+
+
+def _compile_error(exc: Exception) -> str:
+    """MuJoCo's message, or what its bindings say when the C++ threw something they do not
+    translate (pybind11's "Caught an unknown exception!", an allocation that failed)."""
+    text = _shortened(str(exc))
+    if not text or "unknown exception" in text.lower():
+        return (f"failed without saying why ({type(exc).__name__}: {text or 'no message'}; "
+                "often memory running out)")
+    return text
 
 
 def _shortened(message: str) -> str:
