@@ -16,12 +16,13 @@ import numpy as np
 cimport numpy as cnp
 from cpython.exc cimport PyErr_CheckSignals
 from cpython.pycapsule cimport PyCapsule_GetPointer
+from libc.float cimport DBL_MAX, DBL_MIN
 from libc.math cimport NAN, isfinite
 from libc.stdint cimport int32_t, int64_t
 from libc.stdlib cimport free, malloc
 
 from gagen.errors import NonFiniteStateError, SingularMassMatrixError
-from gagen.runtime.inputs import as_float_array
+from gagen.runtime.inputs import as_float_array, quaternion_error
 
 cnp.import_array()
 
@@ -207,6 +208,26 @@ cdef inline bint _all_finite(const double *x, Py_ssize_t n) noexcept:
     return True
 
 
+cdef int _bad_quaternion(const double *q, Py_ssize_t rows, Py_ssize_t step,
+                         const int *offsets, int count, Py_ssize_t *row) noexcept nogil:
+    """The first quaternion (its index in offsets; its row in *row) whose entries are
+    finite but whose squared norm is not a finite normal double, or -1
+    (gagen.runtime.inputs.check_quaternions says why)."""
+    cdef Py_ssize_t i
+    cdef int k
+    cdef const double *x
+    cdef double n2
+    for i in range(rows):
+        for k in range(count):
+            x = q + i * step + offsets[k]
+            if isfinite(x[0]) and isfinite(x[1]) and isfinite(x[2]) and isfinite(x[3]):
+                n2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3]
+                if not (n2 >= DBL_MIN and n2 <= DBL_MAX):
+                    row[0] = i
+                    return k
+    return -1
+
+
 cdef inline double *_data(cnp.ndarray a) noexcept:
     return <double *>cnp.PyArray_DATA(a)
 
@@ -268,6 +289,9 @@ cdef class _Evaluator:
     cdef readonly str ident
     cdef readonly object parameter_vector
     cdef object _capsule  # keeps the module's table (and the module) alive
+    cdef int *_quaternions  # where each floating joint's quaternion starts in q
+    cdef int _nquaternions
+    cdef readonly tuple quaternions  # (first entry in q, description) of each
 
     cdef void _adopt(self, object capsule, const char *ident, int np_, int err_nonfinite,
                      const double *defaults):
@@ -276,6 +300,38 @@ cdef class _Evaluator:
         self.np_ = np_
         self.err_nonfinite = err_nonfinite
         self._defaults = defaults
+
+    cdef int _set_quaternions(self, object quaternions, int nq) except -1:
+        """The quaternions that q's checks look at (ModelInfo.quaternions())."""
+        self.quaternions = tuple((int(offset), str(label)) for offset, label in quaternions)
+        if any(not 0 <= offset <= nq - 4 for offset, _ in self.quaternions):
+            raise ValueError(f"a quaternion must lie within q's {nq} entries")
+        self._nquaternions = len(self.quaternions)
+        if self._nquaternions:
+            self._quaternions = <int *>malloc(self._nquaternions * sizeof(int))
+            if self._quaternions == NULL:
+                raise MemoryError()
+            for k, (offset, _) in enumerate(self.quaternions):
+                self._quaternions[k] = offset
+        return 0
+
+    def __dealloc__(self):
+        free(self._quaternions)
+
+    cdef int _check_quaternions(self, cnp.ndarray q, Py_ssize_t rows, str name) except -1:
+        """ValueError for a quaternion of q that cannot be normalised (one state, or
+        `rows` stacked ones)."""
+        if self._nquaternions == 0:
+            return 0
+        cdef Py_ssize_t row = 0
+        cdef int k = _bad_quaternion(_data(q), rows if rows >= 0 else 1, _step(q),
+                                     self._quaternions, self._nquaternions, &row)
+        if k >= 0:
+            offset, label = self.quaternions[k]
+            values = q[row] if rows >= 0 else q
+            raise quaternion_error(name, label, row if rows >= 0 else -1,
+                                   values[offset: offset + 4])
+        return 0
 
     cdef cnp.ndarray _parameters(self, object p):
         if type(p) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>p) == cnp.NPY_DOUBLE \
@@ -338,10 +394,11 @@ cdef class CompiledModel(_Evaluator):
     cdef const gagen_model_api *api
     cdef readonly object external_forces
 
-    def __init__(self, capsule, parameter_vector, external_forces=None):
+    def __init__(self, capsule, parameter_vector, external_forces=None, quaternions=()):
         self.api = <const gagen_model_api *>_table(capsule, MODEL_CAPSULE)
         self._adopt(capsule, self.api.ident, self.api.np, self.api.err_nonfinite,
                     self.api.parameter_defaults)
+        self._set_quaternions(quaternions, self.api.nq)
         self.parameter_vector = parameter_vector
         self.external_forces = external_forces
 
@@ -359,6 +416,7 @@ cdef class CompiledModel(_Evaluator):
             rows = _rows(b, rows, ny)
         if nz is not None:
             rows = _rows(c, rows, nz)
+        self._check_quaternions(a, rows, nx)
         cdef cnp.ndarray out = _vectors(rows, nout)
         cdef int status = 0
         if rows < 0:
@@ -449,6 +507,7 @@ cdef class CompiledModel(_Evaluator):
         cdef Py_ssize_t rows = _rows(a, -1, "q")
         if which == 2:
             rows = _rows(b, rows, "qd")
+        self._check_quaternions(a, rows, "q")
         cdef int nout = 12 if which == 0 else (6 * api.nv if which == 1 else 6)
         # allocated in its final shape (a reshape or a row view afterwards costs more than
         # the kernel on a small robot)
@@ -881,10 +940,11 @@ cdef class CompiledDerivatives(_Evaluator):
 
     cdef const gagen_derivatives_api *api
 
-    def __init__(self, capsule, parameter_vector):
+    def __init__(self, capsule, parameter_vector, quaternions=()):
         self.api = <const gagen_derivatives_api *>_table(capsule, DERIVATIVES_CAPSULE)
         self._adopt(capsule, self.api.ident, self.api.np, self.api.err_nonfinite,
                     self.api.parameter_defaults)
+        self._set_quaternions(quaternions, self.api.nq)
         self.parameter_vector = parameter_vector
 
     cdef tuple _run(self, Derivative kernel, int count, Py_ssize_t r0, Py_ssize_t c0,
@@ -903,6 +963,7 @@ cdef class CompiledDerivatives(_Evaluator):
             rows = _rows(b, rows, ny)
         if nz is not None:
             rows = _rows(c, rows, nz)
+        self._check_quaternions(a, rows, nx)
         cdef cnp.ndarray m0 = _matrices(rows, r0, c0)
         cdef cnp.ndarray m1 = _matrices(rows, r1, c1) if count > 1 else m0
         cdef cnp.ndarray m2 = _matrices(rows, r1, c1) if count > 2 else m0

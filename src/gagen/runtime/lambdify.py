@@ -15,6 +15,7 @@ from ..symbolic.derivatives import DerivativeEquations, derive_derivatives
 from ..symbolic.differentiate import needed_definitions
 from ..symbolic.gibbs_appell import Equations
 from .dynamics import Dynamics, SingularMassMatrixError, as_states
+from .inputs import check_quaternions
 
 log = logging.getLogger(__name__)
 
@@ -72,6 +73,7 @@ class LambdifyDynamics(Dynamics):
                            cse=lambda expressions: (definitions, expressions))
 
     def _call(self, fn, states, p, stacked):
+        check_quaternions(states[0], self._quaternions)  # every kernel's first state is q
         pv = self.parameter_vector(p)
         columns = [col for s in states for col in (s.T if stacked else s)]
         values = fn(*columns, *pv)

@@ -247,15 +247,14 @@ def constant_wrenches(dyn, fext) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def initial_configuration(dyn, q0: np.ndarray) -> np.ndarray:
-    """q0, with each floating joint's quaternion normalised (ValueError for a zero one)."""
+    """q0, with each floating joint's quaternion normalised (ValueError for one that cannot
+    be: zero, or with a squared norm that overflows or underflows)."""
     if dyn.nq == dyn.nv:
         return q0
-    from ..runtime.manifold import floating_slices, normalized
+    from ..runtime.inputs import check_quaternions
+    from ..runtime.manifold import normalized
 
-    for iq, _ in floating_slices(dyn.info):
-        if not np.linalg.norm(q0[iq + 3: iq + 7]) > 1e-12:
-            raise ValueError(f"q0's quaternion {dyn.configuration[iq + 3: iq + 7]} is zero: "
-                             "the identity is (0, 0, 0, 1)")
+    check_quaternions(q0, dyn.info.quaternions(), "q0")
     return normalized(dyn.info, q0)
 
 
