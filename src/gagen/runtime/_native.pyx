@@ -22,7 +22,7 @@ from libc.stdint cimport int32_t, int64_t
 from libc.stdlib cimport free, malloc
 
 from gagen.errors import NonFiniteStateError, SingularMassMatrixError
-from gagen.runtime.inputs import as_float_array, quaternion_error
+from gagen.runtime.inputs import as_float_array, as_states, quaternion_error
 
 cnp.import_array()
 
@@ -470,7 +470,8 @@ cdef class CompiledModel(_Evaluator):
     def forward_dynamics(self, q, qd, tau, p=None, fext=None):
         """qdd = M(q)^-1 F(q, qd, tau [+ J^T w of the wrenches fext])."""
         if fext is not None:
-            tau = as_float_array(tau, "tau") + self.external_forces(q, fext, p)
+            (q, tau), _ = as_states((self.api.nq, self.api.nv), q, tau, names=("q", "tau"))
+            tau = tau + self.external_forces(q, fext, p)
         return self._run(FORWARD_DYNAMICS, self.api.nv, q, qd, tau, p, "q", "qd", "tau")
 
     def inverse_dynamics(self, q, qd, qdd, p=None, fext=None):

@@ -96,7 +96,8 @@ class LambdifyDynamics(Dynamics):
 
     def forward_dynamics(self, q, qd, tau, p=None, fext=None) -> np.ndarray:
         if fext is not None:
-            tau = np.asarray(tau, dtype=float) + self.external_forces(q, fext, p)
+            (q, tau), _ = as_states(self._sizes[::2], q, tau, names=("q", "tau"))
+            tau = tau + self.external_forces(q, fext, p)
         L = _cholesky(self.mass_matrix(q, p))
         return _cholesky_solve(L, self.forcing(q, qd, tau, p)[..., None])[..., 0]
 

@@ -34,6 +34,7 @@ from .simulate import (
     constant_wrenches,
     controller_spec,
     initial_configuration,
+    nonfinite_origin,
     status_error,
     unit_quaternions,
 )
@@ -42,6 +43,8 @@ from .simulate import (
 STATUS, NFEV, NSTEPS, NACCEPTED, NREJECTED = range(5)
 # A run of a Dask chunk that failed on its worker after its retries (not a C status).
 STATUS_CHUNK_FAILED = -201
+# Failed runs whose NaN is traced to its origin (nonfinite_origin: a few dynamics calls each)
+DIAGNOSED_RUNS = 1000
 # How often the waiting thread reports progress and notices Ctrl-C, in seconds.
 _WAIT_SECONDS = 0.1
 Progress = Callable[[int, int], None]
@@ -355,14 +358,29 @@ def batch_result(dyn, plan: BatchPlan, q, qd, tau, stats: np.ndarray,
     s = plan.settings
     status = stats[:, STATUS].astype(np.int32)
     message = [SUCCESS_MESSAGE] * len(status)
+    diagnosed = 0
     for i in np.flatnonzero(status):
+        origin = None
+        if status[i] in (2, -105) and diagnosed < DIAGNOSED_RUNS:
+            origin = _nonfinite_origin(dyn, plan, int(i))
+            diagnosed += 1
         message[i] = (failures or {}).get(int(i)) or str(
-            status_error(int(status[i]), s.method, s.t_eval, np.asarray(q[i]), dyn.info.name))
+            status_error(int(status[i]), s.method, s.t_eval, np.asarray(q[i]), dyn.info.name,
+                         origin))
     return BatchResult(s.t_eval.copy(), q, qd, tau, status, message,
                        stats[:, NFEV].copy(), stats[:, NACCEPTED].copy(),
                        stats[:, NREJECTED].copy(), list(dyn.coordinates),
                        {"method": s.method, "backend": dyn.backend, "runs": len(status),
                         "failed": int(np.count_nonzero(status))})
+
+
+def _nonfinite_origin(dyn, plan: BatchPlan, i: int) -> str | None:
+    """Where run i's NaN or inf came from, when its initial state is the cause."""
+    nq = dyn.nq
+    p = plan.p[i if plan.p.shape[0] > 1 else 0]
+    fext = None if plan.wrenches is None else dict(zip(plan.wrenches[0].tolist(),
+                                                       plan.wrenches[1]))
+    return nonfinite_origin(dyn, plan.y0[i, :nq], plan.y0[i, nq:], p, fext=fext)
 
 
 def simulate_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: str = "dopri5",
