@@ -25,7 +25,6 @@ loss and armature are returned by `joint_terms`.
 
 from __future__ import annotations
 
-import warnings
 from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
@@ -33,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import sympy as sp
 
-from ..errors import ModelError, one_line
+from ..errors import ModelError, one_line, warn_user
 from .inputs import MAX_BODIES, name_field, quote
 from .merge import merge_fixed_joints, symmetric
 from .mjcf_files import scan_mjcf
@@ -80,8 +79,7 @@ def compile_mjcf(path: str | Path):
     except Exception as exc:  # noqa: BLE001 - every error of MuJoCo's is the file's
         raise ModelError(source, "MuJoCo's compiler", _compile_error(exc)) from None
     for note in notes:
-        warnings.warn(one_line(f"{source}: MuJoCo's compiler: {_shortened(note)}"),
-                      stacklevel=2)
+        warn_user(one_line(f"{source}: MuJoCo's compiler: {_shortened(note)}"), UserWarning)
     if mj.nbody - 1 > MAX_BODIES:
         raise ModelError(source, "<worldbody>", f"{mj.nbody - 1} bodies; gagen builds robots "
                          f"of at most {MAX_BODIES} bodies")
