@@ -306,8 +306,27 @@ def available_memory() -> int | None:
         try:
             values.append(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
         except (ValueError, OSError, AttributeError):
+            pass
+    room = _address_space_left()
+    if room is not None:
+        values.append(room)
+    return min(values) if values else None
+
+
+def _address_space_left() -> int | None:
+    """What this process's address-space limit (ulimit -v) leaves, or None (no limit)."""
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft == resource.RLIM_INFINITY:
             return None
-    return min(values)
+        status = Path("/proc/self/status").read_text()
+        size = next(int(line.split()[1]) * 1024 for line in status.splitlines()
+                    if line.startswith("VmSize:"))
+        return max(0, soft - size)
+    except (ImportError, OSError, ValueError, StopIteration):
+        return None
 
 
 def free_disk(path: Path) -> int | None:

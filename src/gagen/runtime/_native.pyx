@@ -210,8 +210,8 @@ cdef inline bint _all_finite(const double *x, Py_ssize_t n) noexcept:
 
 cdef int _bad_quaternion(const double *q, Py_ssize_t rows, Py_ssize_t step,
                          const int *offsets, int count, Py_ssize_t *row) noexcept nogil:
-    """The first quaternion (its index in offsets; its row in *row) whose entries are
-    finite but whose squared norm is not a finite normal double, or -1
+    """The first quaternion (its index in offsets; its row in *row) whose squared norm is
+    not a finite normal double (NaN or inf entries included), or -1
     (gagen.runtime.inputs.check_quaternions says why)."""
     cdef Py_ssize_t i
     cdef int k
@@ -220,11 +220,10 @@ cdef int _bad_quaternion(const double *q, Py_ssize_t rows, Py_ssize_t step,
     for i in range(rows):
         for k in range(count):
             x = q + i * step + offsets[k]
-            if isfinite(x[0]) and isfinite(x[1]) and isfinite(x[2]) and isfinite(x[3]):
-                n2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3]
-                if not (n2 >= DBL_MIN and n2 <= DBL_MAX):
-                    row[0] = i
-                    return k
+            n2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3]
+            if not (n2 >= DBL_MIN and n2 <= DBL_MAX):
+                row[0] = i
+                return k
     return -1
 
 

@@ -9,6 +9,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from ..errors import NonFiniteStateError
+
 # The smallest normal double: a quaternion's squared norm below it has lost its precision
 # (subnormal) or vanished, and 2 / |quat|^2, by which the kinematics scale the rotation,
 # overflows; above the largest double the squared norm is inf and the rotation would be
@@ -87,17 +89,17 @@ def finite_parameters(values: np.ndarray) -> np.ndarray:
 
 def check_quaternions(q: np.ndarray, quaternions, name: str = "q") -> None:
     """Refuse a floating joint's quaternion whose squared norm overflows (inf) or
-    underflows (below the smallest normal double) although its entries are finite: the
-    rotation of such a quaternion cannot be computed (an overflowing one would silently
-    be the identity). `quaternions`: (first entry in q, description) of each, as
-    `ModelInfo.quaternions()` gives them; q is (nq,) or stacked (N, nq). NaN and inf
-    entries are left to the NaN checks of the dynamics."""
+    underflows (below the smallest normal double): the rotation of such a quaternion
+    cannot be computed (an overflowing one would silently be the identity). A quaternion
+    holding NaN or inf is a NonFiniteStateError (the orientation alone may not show in
+    the mass matrix, so the dynamics' own NaN check would not see it). `quaternions`:
+    (first entry in q, description) of each, as `ModelInfo.quaternions()` gives them; q
+    is (nq,) or stacked (N, nq)."""
     for offset, label in quaternions:
         quat = q[..., offset: offset + 4]
-        with np.errstate(over="ignore", under="ignore"):
+        with np.errstate(over="ignore", under="ignore", invalid="ignore"):
             norm2 = np.sum(quat * quat, axis=-1)
-        bad = np.isfinite(quat).all(axis=-1) & ~((norm2 >= SMALLEST_NORMAL)
-                                                 & (norm2 < np.inf))
+        bad = ~((norm2 >= SMALLEST_NORMAL) & (norm2 < np.inf))
         if np.any(bad):
             row = int(np.flatnonzero(np.atleast_1d(bad))[0]) if q.ndim == 2 else -1
             raise quaternion_error(name, label, row, quat[row] if row >= 0 else quat)
@@ -107,13 +109,15 @@ def quaternion_error(name: str, label: str, row: int, quat) -> ValueError:
     """The one-line error for a quaternion that cannot be normalised (check_quaternions;
     the compiled runtime raises the same)."""
     quat = np.asarray(quat, dtype=float)
+    where = f" (stacked input, row {row})" if row >= 0 else ""
+    label = label.replace("q[", f"{name}[", 1) if name != "q" else label
+    if not np.isfinite(quat).all():
+        return NonFiniteStateError(f"{label} holds NaN or inf{where}")
     largest = float(np.abs(quat).max())
     with np.errstate(over="ignore", under="ignore"):
         overflows = not np.isfinite(np.sum(quat * quat))
     what = (f"its squared norm overflows (an entry of {largest:.3g})" if overflows else
             "it is zero" if largest == 0 else
             f"its squared norm underflows (entries of at most {largest:.3g})")
-    where = f" (stacked input, row {row})" if row >= 0 else ""
-    label = label.replace("q[", f"{name}[", 1) if name != "q" else label
     return ValueError(f"{label} cannot be normalised in double precision{where}: {what}; "
                       "give it at a scale near 1, e.g. (0, 0, 0, 1) for no rotation")
