@@ -423,6 +423,28 @@ def test_integrate_refuses_a_step_that_overflows(tumblers):
     refused(lambda: dyn.integrate(dyn.neutral(), np.zeros(7), [0.1, 0.2]), TypeError, "dt")
 
 
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # NumPy on the hostile numbers
+@pytest.mark.parametrize("backend", ["compiled", "lambdify"])
+def test_parameters_whose_products_overflow_are_not_blamed_on_q(backend):
+    """A finite q with parameters whose products overflow: the message says so, where it
+    used to say q holds NaN or inf."""
+    dyn = gagen.load("rrr", backend=backend)
+    big = {"m1": 1e300, "L1": 1e300}
+    for q in (np.zeros(3), np.zeros((2, 3))):
+        error = refused(lambda q=q: dyn.forward_dynamics(q, np.zeros(3), np.zeros(3), p=big),
+                        NonFiniteStateError, "product of the parameters and q's entries")
+        assert "q holds" not in str(error)
+    refused(lambda: dyn.forward_dynamics([0.0, np.nan, 0.0], np.zeros(3), np.zeros(3)),
+            NonFiniteStateError, r"q holds NaN or inf \(q\[1\] is nan\)")
+
+
+def test_mjcf_gravity_is_normed_without_overflow(tmp_path):
+    path = write(tmp_path, "m.xml", mjcf().replace("<mujoco>", '<mujoco><option gravity='
+                                                                 '"1e200 1e200 0"/>'))
+    model = resolve_model(path)
+    assert model.parameters["g"] == pytest.approx(np.sqrt(2) * 1e200, rel=1e-15)
+
+
 # ======================================================================= 3. shapes
 
 @pytest.mark.parametrize("backend", ["compiled", "lambdify"])

@@ -310,7 +310,8 @@ def _with_mass(body: Body, mj, b: int, anchor: np.ndarray, source: str, strict: 
 def _gravity(mj) -> tuple[float, list[sp.Expr]]:
     """(g, unit direction of gravity): gravity is -g times the negated direction."""
     gravity = np.asarray(mj.opt.gravity, dtype=float)
-    g = float(np.linalg.norm(gravity))
+    scale = float(np.abs(gravity).max())
+    g = scale * float(np.linalg.norm(gravity / scale)) if scale > 0 else 0.0  # no overflow
     if g == 0.0 or int(mj.opt.disableflags) & _GRAVITY_DISABLED:
         return 0.0, [sp.Integer(0), sp.Integer(0), sp.Integer(1)]
     return g, exact_units(-gravity / g)

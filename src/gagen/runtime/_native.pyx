@@ -22,7 +22,7 @@ from libc.stdint cimport int32_t, int64_t
 from libc.stdlib cimport free, malloc
 
 from gagen.errors import NonFiniteStateError, SingularMassMatrixError
-from gagen.runtime.inputs import as_float_array, as_states, quaternion_error
+from gagen.runtime.inputs import as_float_array, as_states, nonfinite_cause, quaternion_error
 
 cnp.import_array()
 
@@ -266,12 +266,12 @@ cdef inline cnp.ndarray _matrices(Py_ssize_t rows, Py_ssize_t r, Py_ssize_t c):
     return cnp.PyArray_EMPTY(3, dims, cnp.NPY_DOUBLE, 0)
 
 
-def _raise_not_positive_definite(str ident, int err_nonfinite, row, status=1):
+def _raise_not_positive_definite(str ident, int err_nonfinite, row, status=1, q=None):
     where = "" if row < 0 else f" (stacked input, row {row})"
     if status == err_nonfinite:
         raise NonFiniteStateError(
             f"the mass matrix of model '{ident}' is NaN or inf at this state{where}: "
-            "q holds NaN or inf")
+            + nonfinite_cause(q))
     raise SingularMassMatrixError(
         f"the mass matrix of model '{ident}' is singular or not positive definite at this "
         f"state{where}; check the state for NaN or inf and the parameters for zero or "
@@ -349,8 +349,10 @@ cdef class _Evaluator:
         keep.append(pa)
         return <const double *>cnp.PyArray_DATA(pa)
 
-    cdef _failed(self, Py_ssize_t row, int status):
-        _raise_not_positive_definite(self.ident, self.err_nonfinite, row, status)
+    cdef _failed(self, Py_ssize_t row, int status, cnp.ndarray q):
+        """Raise for a kernel's failure at one state (row -1) or a stacked one's row."""
+        _raise_not_positive_definite(self.ident, self.err_nonfinite, row, status,
+                                     q if row < 0 else q[row])
 
 
 # --- the model's kernels ------------------------------------------------------------------
@@ -421,7 +423,7 @@ cdef class CompiledModel(_Evaluator):
         if rows < 0:
             status = _call(api, kernel, _data(a), _data(b), _data(c), pp, _data(out))
             if status:
-                self._failed(-1, status)
+                self._failed(-1, status, a)
             return out
         cdef double *pa_ = _data(a)
         cdef double *pb = _data(b)
@@ -451,7 +453,7 @@ cdef class CompiledModel(_Evaluator):
                 gagen_stream_fence()
         free(scratch)
         if failed >= 0:
-            self._failed(failed, status)
+            self._failed(failed, status, a)
         return out
 
     def mass_matrix(self, q, p=None):
@@ -991,7 +993,7 @@ cdef class CompiledDerivatives(_Evaluator):
                         failed = i
                         status = code
         if status:
-            self._failed(failed, status)
+            self._failed(failed, status, a)
         if count == 1:
             return (m0,)
         if count == 2:

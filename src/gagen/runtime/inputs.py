@@ -121,3 +121,17 @@ def quaternion_error(name: str, label: str, row: int, quat) -> ValueError:
             f"its squared norm underflows (entries of at most {largest:.3g})")
     return ValueError(f"{label} cannot be normalised in double precision{where}: {what}; "
                       "give it at a scale near 1, e.g. (0, 0, 0, 1) for no rotation")
+
+
+def nonfinite_cause(q) -> str:
+    """Why the dynamics at q came out NaN or inf: q holds NaN or inf, or, q being finite,
+    a product of its entries and the parameters overflowed."""
+    if q is None:
+        return "q holds NaN or inf"
+    q = np.asarray(q, dtype=float)
+    if not np.isfinite(q).all():
+        k = int(np.flatnonzero(~np.isfinite(q))[0])
+        return f"q holds NaN or inf (q[{k}] is {q[k]})"
+    return (f"q is finite (largest |entry| {np.abs(q).max():.3g}), so a product of the "
+            "parameters and q's entries overflowed: check the scale of the parameters (p=) "
+            "and of q")
