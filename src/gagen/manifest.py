@@ -125,6 +125,18 @@ class ModelInfo:
             iv += len(joint_names(joint, VELOCITY))
         return out
 
+    def quaternions(self) -> tuple[tuple[int, str], ...]:
+        """(first entry in q, description) of each floating joint's quaternion, for the
+        input checks (gagen.runtime.inputs.check_quaternions)."""
+        out = []
+        for (iq, _), joint in zip(self.floating_joints(),
+                                  [j for j in self.joints if j.type == "floating"]):
+            names = ", ".join(joint_names(joint, CONFIGURATION)[3:])
+            label = (f"q[{iq + 3}:{iq + 7}] ({names}), the quaternion of floating joint "
+                     f"{joint.name!r},")
+            out.append((iq + 3, label))
+        return tuple(out)
+
     @property
     def parameter_defaults(self) -> dict[str, float]:
         return dict(self.parameters)

@@ -71,6 +71,9 @@ def _count(low: int, high: int, what: str) -> Callable[[str], int]:
 
 _sample_count = _count(2, 10_000_000, "samples")
 _run_count = _count(1, 100_000_000, "runs")
+_thread_count = _count(1, 4096, "threads")
+_seed = _count(0, 2**64 - 1, "(a seed)")
+_degree = _count(2, 20, "(a polynomial degree)")
 
 
 def _numbers(text: str) -> list[float]:
@@ -206,7 +209,8 @@ def _sweep_arguments(p: argparse.ArgumentParser) -> None:
                    "its default; NAME is a parameter (patterns allowed: 'm[123]=20%%'), or "
                    "q0, qd0, kp, kd, target (degrees for angles), or one coordinate of them "
                    "(q0.q2=-10:10); repeat for several")
-    p.add_argument("--seed", type=int, default=0, help="seed of the draws (default: 0)")
+    p.add_argument("--seed", type=_seed, default=0,
+                   help="seed of the draws, a whole number >= 0 (default: 0)")
     p.add_argument("--duration", type=_positive, default=5.0, metavar="S",
                    help="simulated time in seconds (default: %(default)s)")
     p.add_argument("--points", type=_sample_count, default=501, metavar="N",
@@ -214,7 +218,7 @@ def _sweep_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", choices=COMPILED_METHODS, default="dopri5",
                    help="gagen's C integrator (default: %(default)s)")
     _add_tolerances(p)
-    p.add_argument("--threads", type=int, default=None, metavar="K",
+    p.add_argument("--threads", type=_thread_count, default=None, metavar="K",
                    help="threads for the runs (default: every core)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on a Dask cluster, e.g. tcp://host:8786 (needs gagen[dask])")
@@ -249,8 +253,8 @@ def _identify_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--window", type=_positive, default=None, metavar="S",
                    help="Savitzky-Golay window in seconds for missing rates and "
                    "accelerations (default: 0.05)")
-    p.add_argument("--polyorder", type=int, default=4, metavar="K",
-                   help="Savitzky-Golay polynomial degree, at least 2 (default: %(default)s)")
+    p.add_argument("--polyorder", type=_degree, default=4, metavar="K",
+                   help="Savitzky-Golay polynomial degree, 2 to 20 (default: %(default)s)")
     p.add_argument("--min-speed", type=_nonnegative, default=0.0, metavar="V",
                    help="leave out each joint's torque where it moves slower than V (rad/s, "
                    "m/s): Coulomb friction at rest holds any torque within its bound "
@@ -633,18 +637,46 @@ def parser() -> argparse.ArgumentParser:
 # ---------------------------------------------------------------------------- main
 
 
-# What a user can cause, and the exit code each gets: bad input (2) or a run that failed (1).
-# Anything else is a bug in gagen and keeps its traceback.
+# What a user can cause, and the exit code each gets: bad input (2) or a run that failed (1),
+# out of memory or a missing optional package included. Anything else is a bug in gagen and
+# keeps its traceback.
 def _exit_code(exc: BaseException) -> int | None:
     from ..building.builder import BuildError
     from ..runtime.dynamics import SingularMassMatrixError
 
     if isinstance(exc, (BuildError, SingularMassMatrixError, NonFiniteStateError, OSError,
-                        RuntimeError, ImportError)):  # ImportError: an extra to install
+                        RuntimeError, MemoryError, ImportError)):
         return 1
-    if isinstance(exc, (ModelError, ValueError, TypeError, KeyError)):
+    if isinstance(exc, (ModelError, ValueError, TypeError, KeyError, ArithmeticError)):
         return 2
     return None
+
+
+# The options that decide how much memory a command takes (named when it runs out).
+_SIZING_OPTIONS = {"sweep": "--runs and --points", "simulate": "--points and --duration",
+                   "inverse": "--points", "identify": "the rows of DATA",
+                   "build": "the model's size", "bench": "--full and --models"}
+# Optional packages and the extra of gagen that brings each (pyproject.toml).
+_EXTRAS = {"mujoco": "mjcf", "zarr": "zarr", "dask": "dask", "distributed": "dask",
+           "pinocchio": "bench", "pydy": "bench", "cmeel": "bench"}
+
+
+def _message(exc: BaseException, command: str) -> str:
+    """The one line the CLI prints for a user's error (see _exit_code)."""
+    if isinstance(exc, MemoryError):
+        return (f"out of memory running '{command}'"
+                + (f": {_SIZING_OPTIONS[command]} decide how much it takes"
+                   if command in _SIZING_OPTIONS else ""))
+    if isinstance(exc, ImportError) and "pip install" not in str(exc):
+        name = (getattr(exc, "name", None) or "").split(".")[0]
+        if name in _EXTRAS:
+            return (f"'{command}' needs the optional package {name}: pip install "
+                    f"'gagen[{_EXTRAS[name]}]'")
+        return f"cannot import {name or 'a module'}: {_one_line(exc)}"
+    if isinstance(exc, ArithmeticError):
+        return (f"a number overflowed in '{command}' ({type(exc).__name__}: "
+                f"{_one_line(exc)}); check the options' ranges")
+    return _one_line(exc)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -667,7 +699,7 @@ def main(argv: list[str] | None = None) -> int:
         code = _exit_code(exc)
         if code is None or args.traceback:
             raise
-        print(f"gagen: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"gagen: error: {_message(exc, args.command)}", file=sys.stderr)
         return code
 
 

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..csvtext import text_cell
 from ..sim.simulate import COMPILED_METHODS, SimulationResult
 
 if TYPE_CHECKING:
@@ -280,7 +281,7 @@ def _write_inverse_csv(run: InverseRun, path: Path) -> Path:
               + [f"tau_{c}" for c in names])
     with path.open("w", newline="") as fh:
         writer = csv.writer(fh)
-        writer.writerow(header)
+        writer.writerow([text_cell(name) for name in header])
         for row in np.column_stack([run.t, run.q, run.qd, run.qdd, run.tau]):
             writer.writerow([repr(float(v)) for v in row])
     return path

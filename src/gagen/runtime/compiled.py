@@ -47,7 +47,7 @@ class CompiledDynamics(Dynamics):
         self._derivatives = derivatives
         self.derivative_module = None
         self.kernels = native().CompiledModel(module.API, self.parameter_vector,
-                                              self.external_forces)
+                                              self.external_forces, self.info.quaternions())
         for name in KERNEL_METHODS + CENTROIDAL_METHODS:
             setattr(self, name, getattr(self.kernels, name))
 
@@ -88,7 +88,8 @@ class CompiledDynamics(Dynamics):
                 f"the derivative module {module.__name__} was not built from the equations of "
                 f"{self.module.__name__} (its key {module.EQUATIONS_KEY[:12]}, expected "
                 f"{self.module.KEY[:12]})")
-        kernels = native().CompiledDerivatives(module.API, self.parameter_vector)
+        kernels = native().CompiledDerivatives(module.API, self.parameter_vector,
+                                               self.info.quaternions())
         for name in DERIVATIVE_METHODS:
             setattr(self, name, getattr(kernels, name))
         self.derivative_module = module

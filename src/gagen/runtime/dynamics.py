@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import SingularMassMatrixError  # noqa: F401 (re-exported)
 from ..manifest import ModelInfo
-from .inputs import as_states, parameter_array
+from .inputs import as_states, check_quaternions, parameter_array
 
 
 class Dynamics:
@@ -114,17 +114,28 @@ class Dynamics:
     def integrate(self, q, v, dt=1.0) -> np.ndarray:
         """q ⊕ v·dt, as Pinocchio's `integrate(model, q, v * dt)`: a floating joint moves
         along the twist v (its origin's velocity and its angular velocity, in its body's
-        frame) held for dt, every other coordinate by v·dt. Shapes (nq,), (nv,) or stacked."""
-        from .manifold import integrate
+        frame) held for dt, every other coordinate by v·dt. Shapes (nq,), (nv,) or stacked;
+        dt a number."""
+        from .manifold import checked_step, integrate
 
-        return integrate(self.info, q, v, dt)
+        (q, v), _ = as_states(self._sizes[:2], q, v, names=("q", "v"))
+        check_quaternions(q, self._quaternions)
+        return integrate(self.info, q, checked_step(self.info, v, dt), 1.0)
 
     def difference(self, q0, q1) -> np.ndarray:
         """The velocity v, shape (nv,), with `integrate(q0, v) == q1` (Pinocchio's
         `difference`); stacked inputs give stacked outputs."""
         from .manifold import difference
 
+        (q0, q1), _ = as_states((self.nq, self.nq), q0, q1, names=("q0", "q1"))
+        check_quaternions(q0, self._quaternions, "q0")
+        check_quaternions(q1, self._quaternions, "q1")
         return difference(self.info, q0, q1)
+
+    @cached_property
+    def _quaternions(self) -> tuple[tuple[int, str], ...]:
+        """(first entry in q, description) of each floating joint's quaternion."""
+        return self.info.quaternions()
 
     def neutral(self) -> np.ndarray:
         """The configuration with every coordinate 0 and every quaternion the identity."""

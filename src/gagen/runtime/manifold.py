@@ -172,6 +172,27 @@ def configuration_rate(info, q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return out
 
 
+def checked_step(info, v: np.ndarray, dt) -> np.ndarray:
+    """v * dt, refused (ValueError) unless dt is a finite number and the step is finite with
+    each floating joint's rotation vector of a finite norm (a norm that overflows leaves no
+    angle to turn by)."""
+    if isinstance(dt, (bool, str, bytes)) or np.ndim(dt) != 0:
+        raise TypeError(f"dt must be a number, got {type(dt).__name__}")
+    dt = float(dt)
+    if not np.isfinite(dt):
+        raise ValueError(f"dt must be finite, got {dt}")
+    with np.errstate(over="ignore"):
+        step = np.asarray(v, dtype=float) * dt
+        if not np.isfinite(step).all():
+            raise ValueError("v * dt overflows: it must be finite")
+        for _, iv in floating_slices(info):
+            w = step[..., iv + 3: iv + 6]
+            if not np.isfinite(np.sum(w * w, axis=-1)).all():
+                raise ValueError(f"v[{iv + 3}:{iv + 6}] * dt, a floating joint's rotation "
+                                 "vector, has a norm that overflows")
+    return step
+
+
 def integrate(info, q, v, dt=1.0) -> np.ndarray:
     """q ⊕ v dt, as Pinocchio's `integrate(model, q, v * dt)`: fresh array(s)."""
     q = np.array(q, dtype=float)
