@@ -200,6 +200,12 @@ BOMB_RSS = textwrap.dedent("""
     from gagen.model.resolve import resolve_model
 
     def peak():
+        # VmHWM: this process image's peak (ru_maxrss would carry over the forking
+        # parent's peak across exec, e.g. a long test session's)
+        with open("/proc/self/status") as status:
+            for line in status:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     before, out = peak(), []
     for path in sys.argv[1:]:
