@@ -47,6 +47,7 @@ from .model import (
     Model,
     check_inertia,
     exact_units,
+    round_off_floor,
     vector,
 )
 from .parameters import parameterize_joint_terms, parameterize_mass_properties
@@ -289,8 +290,10 @@ def _with_mass(body: Body, mj, b: int, anchor: np.ndarray, source: str, strict: 
     principal = _quat_matrix(mj.body_iquat[b])
     inertia = principal @ np.diag(np.asarray(mj.body_inertia[b], dtype=float)) @ principal.T
     inertia = (inertia + inertia.T) / 2
-    check_inertia(inertia, source, f"body {quote(body.name)}, inertia", strict)
-    com = np.asarray(mj.body_ipos[b], dtype=float) - anchor
+    ipos = np.asarray(mj.body_ipos[b], dtype=float)
+    check_inertia(inertia, source, f"body {quote(body.name)}, inertia", strict,
+                  floor=round_off_floor(float(mj.body_mass[b]), float(np.linalg.norm(ipos))))
+    com = ipos - anchor
     return Body(name=body.name, parent=body.parent, joint=body.joint,
                 mass=_number(mj.body_mass[b]), com=_vector(com),
                 inertia=symmetric(sp.Matrix(3, 3, [_number(v) for v in inertia.ravel()])))
