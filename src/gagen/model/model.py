@@ -261,14 +261,24 @@ class Model:
         """Every named frame: each body's own (its link, and its joint, whose frame is the
         body's: gagen's body frames are joint frames), then `extra_frames`. Names are
         unique: a joint named like a link (ANYmal C's link and joint `LF_HAA`) is listed
-        as `joint:<name>`."""
+        as `joint:<name>`.
+
+        A body's link frame is its joint frame unless `extra_frames` has a link frame named
+        like the body and fixed to it: that one places it, in the body's place in the list
+        (an MJCF body whose joints are anchored away from its origin: its frame is MuJoCo's
+        body frame, its joint frame is at the last joint's anchor)."""
         frames: dict[str, Frame] = {}
+        own = {f.name: f for f in self.extra_frames if f.kind == "link" and f.body == f.name}
         listed = [f for b in self.bodies
-                  for f in (Frame(b.name, b.name), Frame(b.joint.name, b.name, kind="joint"))]
-        for f in listed + list(self.extra_frames):
-            name = f.name
-            if name in frames and frames[name].kind != f.kind:
-                name = f"{f.kind}:{f.name}"
+                  for f in (own.get(b.name, Frame(b.name, b.name)),
+                            Frame(b.joint.name, b.name, kind="joint"))]
+        placed = {id(f) for f in own.values()}
+        entries = listed + [f for f in self.extra_frames if id(f) not in placed]
+        # links keep their names wherever a joint of the same name comes in the list (an
+        # MJCF body `tail1` whose first joint `tail1` sits on an intermediate body)
+        links = {f.name for f in entries if f.kind == "link"}
+        for f in entries:
+            name = f"{f.kind}:{f.name}" if f.kind != "link" and f.name in links else f.name
             if name not in frames:
                 frames[name] = replace(f, name=name)
         return list(frames.values())
