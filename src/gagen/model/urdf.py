@@ -96,6 +96,12 @@ def parse_urdf_text(text: str | bytes, source: str = "<urdf>", strict: bool = Fa
     bodies = [_body(j, links[j.child], None if floating_base else root, source)
               for j in ordered]
     if floating_base:
+        if root == WORLD:
+            raise ModelError(source, f"link {quote(root)}", "floating_base=True lets the "
+                             f"root link move, but the root link is '{WORLD}', the fixed frame "
+                             "(the URDF welds the robot to the world): load it without "
+                             f"floating_base, or remove link '{WORLD}' and its joint so that "
+                             "the robot's base is the root")
         if any(j.joint.floating for j in ordered):
             raise ModelError(source, f"link {quote(root)}", "floating_base=True adds a floating "
                              "joint to the root link, but the URDF has a floating joint already")
