@@ -629,13 +629,13 @@ INERTIA_TRIANGLE_TOLERANCE = 0.25
 INERTIA_DEFINITE_TOLERANCE = 1e-2
 # Below this (relative) no defect is reported at all: floating-point rounding of R I R^T.
 _ROUNDING = 1e-9
-# Round-off around a zero inertia: a point mass or a rod has a largest principal moment of
-# zero, so no defect is small relative to it, yet exporters write such inertias with
+# Round-off around a zero inertia: a point mass has a largest principal moment of zero,
+# so no defect is small relative to it, yet exporters write such inertias with
 # round-off (example-robot-data's icub: ixx = iyy = -5.4e-20, izz = 0, on a 0.53 kg link
-# whose mass centre is 3 cm from its frame; 5.4e-20 = 2^-64 is one rounding step of
-# m |c|^2 = 4.9e-4). A defect is also round-off when it is below _ROUNDING of m l^2, the
-# moment of the body's mass at the distance l of its mass centre from the body's frame, and
-# at least ROUND_OFF_LENGTH: the scale of what the body adds to M(q).
+# whose mass centre is 3 cm from its frame; 5.4e-20 = 2^-64 is the largest rounding error
+# of a number near m |c|^2 = 4.9e-4). A defect is also round-off when it is below _ROUNDING
+# of m l^2, the moment of the body's mass at the distance l of its mass centre from the
+# body's frame (l at least ROUND_OFF_LENGTH): the scale of what the body adds to M(q).
 ROUND_OFF_LENGTH = 0.01  # m
 BORDERLINE = ("warn", "refuse", "accept")
 
