@@ -55,12 +55,6 @@ def quietly(load, *args, **kwargs):
 @pytest.mark.parametrize("filename", TEST_ROBOTS)
 def test_joint_order_is_pinocchios(filename, floating):
     pm = pinocchio_parse(URDF / filename, floating)
-    if floating and filename == "ur5_robot.urdf":  # its root link is "world"
-        with pytest.raises(gagen.ModelError, match=r"link 'world': floating_base=True lets "
-                           r"the root link move, but the root link is 'world', the fixed "
-                           r"frame .*remove link 'world' and its joint"):
-            resolve_model(URDF / filename, floating_base=True)
-        return
     model = quietly(resolve_model, URDF / filename, floating_base=floating)
     assert urdf_joint_names(model) == list(pm.names)[1:]
     # every joint starts at Pinocchio's velocity index: qd, qdd and tau pass as they are
@@ -70,6 +64,24 @@ def test_joint_order_is_pinocchios(filename, floating):
     built = pinocchio_model(model)
     np.testing.assert_array_equal(built.gagen_order, np.arange(model.nv))
     np.testing.assert_array_equal(built.gagen_configuration_order, np.arange(model.nq))
+
+
+def test_a_root_link_called_world_floats_as_world_link():
+    """The UR5's root link is `world` (welded to base_link): with floating_base=True
+    Pinocchio floats that link, and gagen does too, as `world_link`."""
+    dyn = gagen.load(URDF / "ur5_robot.urdf", backend="lambdify", floating_base=True)
+    pm = pinocchio_parse(URDF / "ur5_robot.urdf", True)
+    assert "world_link" in dyn.frames and dyn.nq == pm.nq == 13
+    errors = compare_with_urdf_parse(dyn, pm, np.random.default_rng(1), states=2)
+    assert max(errors.values()) < RTOL, errors
+    q = urdf_configuration(pm, dyn.neutral())
+    q[:3] = [0.3, -0.2, 1.0]
+    data = pm.createData()
+    pin.framesForwardKinematics(pm, data, q)
+    R, p = dyn.frame_placement(q, "world_link")  # Pinocchio's BODY frame "world"
+    placed = data.oMf[pm.getFrameId("world", pin.BODY)]
+    np.testing.assert_allclose(p, placed.translation, atol=1e-12)
+    np.testing.assert_allclose(R, placed.rotation, atol=1e-12)
 
 
 def test_a_continuous_joint_is_one_angle_where_pinocchio_has_cos_and_sin():

@@ -93,15 +93,11 @@ def parse_urdf_text(text: str | bytes, source: str = "<urdf>", strict: bool = Fa
     links = _parse_links(robot, source)
     joints = _parse_joints(robot, links, source)
     root, ordered = _tree_order(links, joints, source)
+    if floating_base and root == WORLD:
+        root, links, ordered = _floating_world_link(links, ordered)
     bodies = [_body(j, links[j.child], None if floating_base else root, source)
               for j in ordered]
     if floating_base:
-        if root == WORLD:
-            raise ModelError(source, f"link {quote(root)}", "floating_base=True lets the "
-                             f"root link move, but the root link is '{WORLD}', the fixed frame "
-                             "(the URDF welds the robot to the world): load it without "
-                             f"floating_base, or remove link '{WORLD}' and its joint so that "
-                             "the robot's base is the root")
         if any(j.joint.floating for j in ordered):
             raise ModelError(source, f"link {quote(root)}", "floating_base=True adds a floating "
                              "joint to the root link, but the URDF has a floating joint already")
@@ -118,6 +114,21 @@ def parse_urdf_text(text: str | bytes, source: str = "<urdf>", strict: bool = Fa
                       extra_frames=() if floating_base else (Frame(root, WORLD),))
     check_model_inertias(model, strict, *_LINK_INERTIA)
     return parameterize_joint_terms(parameterize_mass_properties(merge_fixed_joints(model)))
+
+
+def _floating_world_link(links: dict[str, _Link], ordered: list[_UrdfJoint]
+                         ) -> tuple[str, dict[str, _Link], list[_UrdfJoint]]:
+    """floating_base=True on a URDF whose root link is `world` (the ROS convention for a
+    robot welded to the world: the UR arms, xArm, Z1): Pinocchio floats that link, and so
+    does gagen, under the name `world_link` (`world` is gagen's fixed frame), or the first
+    name the file leaves free after it."""
+    name = "world_link"
+    while name in links:
+        name += "_"
+    links = {(name if key == WORLD else key): (replace(link, name=name) if key == WORLD
+                                                else link) for key, link in links.items()}
+    ordered = [replace(j, parent=name) if j.parent == WORLD else j for j in ordered]
+    return name, links, ordered
 
 
 def _root_body(link: _Link) -> Body:
