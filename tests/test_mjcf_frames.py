@@ -134,3 +134,22 @@ def test_a_joint_frame_is_at_its_anchor():
     assert np.linalg.norm(mj.jnt_pos[joint]) > 0.1  # anchored 0.25 m off the leg's origin
     close(dyn.frame_placement(q, "right_knee")[1], ref.data.xanchor[joint], "anchor")
     close(dyn.frame_placement(q, "right_leg")[1], ref.data.xpos[body], "origin")
+
+
+@pytest.mark.slow
+def test_compiled_body_frames_are_mujocos(tmp_path):
+    """The compiled backend places frames from the same offsets, in C."""
+    path = DM_CONTROL / "walker.xml"
+    dyn = gagen.load(path, cache_dir=tmp_path, verbose=False)
+    mj = mujoco_model("walker")
+    for q, qd in states(mj, seed=5):
+        ref = MujocoState(mj, q, qd)
+        for body, name in enumerate(body_names(mj), start=1):
+            R, p = dyn.frame_placement(q, name)
+            R_ref, p_ref = ref.body_placement(body)
+            close(np.hstack([R, p[:, None]]), np.hstack([R_ref, p_ref[:, None]]), name)
+            close(dyn.frame_jacobian(q, name), ref.body_jacobian(body), f"{name}: Jacobian")
+            wrench = np.arange(1.0, 7.0)
+            close(dyn.inverse_dynamics(q, qd, np.zeros(mj.nv))
+                  - dyn.inverse_dynamics(q, qd, np.zeros(mj.nv), fext={name: wrench}),
+                  ref.body_wrench_force(body, wrench), f"{name}: fext")
