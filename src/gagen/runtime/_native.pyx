@@ -71,10 +71,10 @@ cdef extern from "gagen_api.h" nogil:
         void (*frame_offsets)(const double *p, double *F) noexcept nogil
         int (*frame_placement)(const double *q, const double *p, int frame, double *R,
                                double *pos) noexcept nogil
-        int (*frame_jacobian)(const double *q, const double *p, int frame,
+        int (*frame_jacobian)(const double *q, const double *p, int frame, int reference,
                               double *J) noexcept nogil
         int (*frame_velocity)(const double *q, const double *qd, const double *p, int frame,
-                              double *v) noexcept nogil
+                              int reference, double *v) noexcept nogil
         void (*regressor)(const double *q, const double *qd, const double *qdd,
                           const double *p, double *Y) noexcept nogil
         void (*regressor_parameters)(const double *p, double *pi) noexcept nogil
@@ -86,6 +86,19 @@ cdef extern from "gagen_api.h" nogil:
         int (*control_torques)(const gagen_control *c, const double *p, long m,
                                const double *t, const double *y,
                                double *tau) noexcept nogil
+        int (*frame_jacobians)(const double *q, const double *p, int count, const int *frames,
+                               int reference, double *J) noexcept nogil
+        int (*frame_acceleration)(const double *q, const double *qd, const double *qdd,
+                                  const double *p, int frame, int reference, int kind,
+                                  double *a) noexcept nogil
+        int (*frame_jacobian_time_variation)(const double *q, const double *qd,
+                                             const double *p, int frame, int reference,
+                                             double *dJ) noexcept nogil
+        int (*delassus)(const double *q, const double *p, int count, const int *frames,
+                        int dims, double *work, double *G) noexcept nogil
+        int (*operational_space_inertia)(const double *q, const double *p, int count,
+                                         const int *frames, int dims, double *work,
+                                         double *Lambda) noexcept nogil
     ctypedef struct gagen_derivatives_api:
         int version
         const char *ident
@@ -436,12 +449,15 @@ cdef class CompiledModel(_Evaluator):
         self.api.frame_offsets(pp, _data(out))
         return out
 
-    def frame(self, int which, int frame, q, qd, p=None):
+    def frame(self, int which, int frame, q, qd, p=None, int reference=2):
         """A frame's placement (which 0: R and origin, 12 values), Jacobian (1: 6 x NV) or
-        velocity (2: 6 values) at one state or stacked states."""
+        velocity (2: 6 values) at one state or stacked states; the last two in `reference`
+        (0 WORLD, 1 LOCAL, 2 LOCAL_WORLD_ALIGNED)."""
         cdef const gagen_model_api *api = self.api
         if not 0 <= frame < api.nf:
             raise IndexError(f"frame {frame} out of range (0 .. {api.nf - 1})")
+        if not 0 <= reference <= 2:
+            raise ValueError(f"reference {reference} is not 0, 1 or 2")
         cdef cnp.ndarray a = _state(q, "q", api.nq)
         cdef cnp.ndarray b = _state(qd, "qd", api.nv) if which == 2 else a
         cdef list keep = []
@@ -463,10 +479,120 @@ cdef class CompiledModel(_Evaluator):
                     api.frame_placement(pa_ + i * sa, pp, frame, po + i * nout,
                                         po + i * nout + 9)
                 elif which == 1:
-                    api.frame_jacobian(pa_ + i * sa, pp, frame, po + i * nout)
+                    api.frame_jacobian(pa_ + i * sa, pp, frame, reference, po + i * nout)
                 else:
-                    api.frame_velocity(pa_ + i * sa, pb + i * sb, pp, frame, po + i * nout)
+                    api.frame_velocity(pa_ + i * sa, pb + i * sb, pp, frame, reference,
+                                       po + i * nout)
         return out
+
+    # --- task space: frames' accelerations, Jacobians' time variation and the
+    # operational-space inertia (conventions: gagen.runtime.taskspace) --------------------
+
+    def frame_rates(self, int which, int frame, int reference, int kind, q, qd, qdd=None,
+                    p=None):
+        """Frame `frame`'s acceleration at qdd (which 0: 6 values, kind 0 classical or 1
+        spatial), its bias acceleration at qdd = 0 (1), or its Jacobian's time variation
+        (2: 6 x NV), in `reference` (0 WORLD, 1 LOCAL, 2 LOCAL_WORLD_ALIGNED), at one state
+        or stacked states."""
+        cdef const gagen_model_api *api = self.api
+        if not 0 <= frame < api.nf:
+            raise IndexError(f"frame {frame} out of range (0 .. {api.nf - 1})")
+        if not (0 <= reference <= 2 and 0 <= kind <= 1 and 0 <= which <= 2):
+            raise ValueError(f"which {which}, reference {reference} or kind {kind} out of range")
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef cnp.ndarray b = _state(qd, "qd", api.nv)
+        cdef cnp.ndarray c = _state(qdd, "qdd", api.nv) if which == 0 else b
+        cdef list keep = []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(b, _rows(a, -1, "q"), "qd")
+        if which == 0:
+            rows = _rows(c, rows, "qdd")
+        cdef int nout = 6 * api.nv if which == 2 else 6
+        cdef cnp.ndarray out = _matrices(rows, 6, api.nv) if which == 2 else _vectors(rows, 6)
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *pc = _data(c) if which == 0 else NULL
+        cdef double *po = _data(out)
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), sc = _step(c), i
+        cdef Py_ssize_t count = rows if rows >= 0 else 1
+        with nogil:
+            for i in range(count):
+                if which == 2:
+                    api.frame_jacobian_time_variation(pa_ + i * sa, pb + i * sb, pp, frame,
+                                                      reference, po + i * nout)
+                else:
+                    api.frame_acceleration(pa_ + i * sa, pb + i * sb,
+                                           pc + i * sc if pc != NULL else NULL, pp, frame,
+                                           reference, kind, po + i * nout)
+        return out
+
+    def frame_jacobians(self, frames, int reference, q, p=None):
+        """The Jacobians of several frames (frame numbers) in `reference`, their common
+        ancestors placed once: (k, 6, NV), or (N, k, 6, NV) for stacked q."""
+        cdef const gagen_model_api *api = self.api
+        if not 0 <= reference <= 2:
+            raise ValueError(f"reference {reference} is not 0, 1 or 2")
+        cdef cnp.ndarray fr = _frame_numbers(frames, api.nf)
+        cdef int k = <int>cnp.PyArray_SIZE(fr)
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef list keep = []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(a, -1, "q")
+        cdef object shape = (k, 6, api.nv)
+        if rows >= 0:
+            shape = (rows,) + shape
+        cdef cnp.ndarray out = np.empty(shape)
+        cdef const int *pf = <const int *>cnp.PyArray_DATA(fr)
+        cdef double *pa_ = _data(a)
+        cdef double *po = _data(out)
+        cdef Py_ssize_t sa = _step(a), nout = 6 * k * api.nv, i
+        cdef Py_ssize_t count = rows if rows >= 0 else 1
+        with nogil:
+            for i in range(count):
+                api.frame_jacobians(pa_ + i * sa, pp, k, pf, reference, po + i * nout)
+        return out
+
+    def task_matrix(self, int which, frames, int dims, q, p=None):
+        """For the stacked rows (the first `dims` of each frame's LOCAL_WORLD_ALIGNED
+        Jacobian) of several frames: J M^-1 J^T (which 0) or its inverse, the
+        operational-space inertia (1); (m, m) or (N, m, m), m = dims * frames. Returns
+        (matrix, status, row): status 0, or the C's code for dependent rows at that row
+        (-1: not stacked); M's failures raise as forward dynamics's."""
+        cdef const gagen_model_api *api = self.api
+        if dims != 3 and dims != 6:
+            raise ValueError(f"dims must be 3 or 6; got {dims}")
+        cdef cnp.ndarray fr = _frame_numbers(frames, api.nf)
+        cdef int k = <int>cnp.PyArray_SIZE(fr)
+        if k < 1:
+            raise ValueError("frames must name at least one frame")
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef list keep = []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(a, -1, "q"), m = dims * k
+        cdef cnp.ndarray out = _matrices(rows, m, m)
+        cdef const int *pf = <const int *>cnp.PyArray_DATA(fr)
+        cdef double *pa_ = _data(a)
+        cdef double *po = _data(out)
+        cdef Py_ssize_t sa = _step(a), i, failed = -1
+        cdef Py_ssize_t count = rows if rows >= 0 else 1
+        cdef int code, status = 0
+        cdef double *work = <double *>malloc(m * api.nv * sizeof(double))
+        if work == NULL:
+            raise MemoryError()
+        with nogil:
+            for i in range(count):
+                if which == 0:
+                    code = api.delassus(pa_ + i * sa, pp, k, pf, dims, work, po + i * m * m)
+                else:
+                    code = api.operational_space_inertia(pa_ + i * sa, pp, k, pf, dims, work,
+                                                         po + i * m * m)
+                if code != 0 and failed < 0:
+                    failed = i
+                    status = code
+        free(work)
+        if status != 0 and (status == self.err_nonfinite or status == 1):
+            self._failed(failed if rows >= 0 else -1, status)
+        return out, status, (failed if rows >= 0 else -1)
 
     def gravity(self, q, p=None):
         """The gravity torques g(q) = inverse_dynamics(q, 0, 0)."""
@@ -536,6 +662,14 @@ def _frame_wrenches(frames, wrenches, int nf):
         raise ValueError(f"frames must be frame numbers in 0 .. {nf - 1}, one finite wrench "
                          "(6 values) each")
     return fr, wr
+
+
+def _frame_numbers(frames, int nf):
+    """Frame numbers as a C-contiguous int32 array (one dimension), each in 0 .. nf - 1."""
+    fr = np.ascontiguousarray(frames, dtype=np.int32).ravel()
+    if np.any(fr < 0) or np.any(fr >= nf):
+        raise IndexError(f"frame numbers must be in 0 .. {nf - 1}")
+    return fr
 
 
 cdef int _method_code(str method) except -1:

@@ -6,7 +6,15 @@ from __future__ import annotations
 from ..errors import BuildError
 from ..manifest import ModelInfo
 from .dynamics import Dynamics
-from .frames import frame_index
+from .frames import frame_index, frame_indices
+from .taskspace import (
+    REFERENCES,
+    kind_code,
+    reference_code,
+    singular_task,
+    task_dims,
+    task_frames,
+)
 
 KERNEL_METHODS = ("mass_matrix", "forcing", "forward_dynamics", "inverse_dynamics",
                   "gravity", "energy", "regressor", "regressor_parameters")
@@ -59,11 +67,57 @@ class CompiledDynamics(Dynamics):
         out = self.kernels.frame(0, frame_index(self.info, frame), q, None, p)
         return out[..., :9].reshape(out.shape[:-1] + (3, 3)), out[..., 9:].copy()
 
-    def frame_jacobian(self, q, frame, p=None):
-        return self.kernels.frame(1, frame_index(self.info, frame), q, None, p)
+    def frame_jacobian(self, q, frame, reference="local_world_aligned", p=None):
+        if isinstance(frame, (list, tuple)):
+            return self.kernels.frame_jacobians(frame_indices(self.info, frame),
+                                                _reference(reference), q, p)
+        return self.kernels.frame(1, frame_index(self.info, frame), q, None, p,
+                                  _reference(reference))
 
-    def frame_velocity(self, q, qd, frame, p=None):
-        return self.kernels.frame(2, frame_index(self.info, frame), q, qd, p)
+    def frame_velocity(self, q, qd, frame, reference="local_world_aligned", p=None):
+        return self.kernels.frame(2, frame_index(self.info, frame), q, qd, p,
+                                  _reference(reference))
+
+    # task space: the C of taskspace.c.j2 (in frames.c)
+
+    def frame_acceleration(self, q, qd, qdd, frame, reference="local_world_aligned",
+                           kind="classical", p=None):
+        return self.kernels.frame_rates(0, frame_index(self.info, frame),
+                                        _reference(reference), _kind(kind), q, qd, qdd, p)
+
+    def frame_bias_acceleration(self, q, qd, frame, reference="local_world_aligned",
+                                kind="classical", p=None):
+        return self.kernels.frame_rates(1, frame_index(self.info, frame),
+                                        _reference(reference), _kind(kind), q, qd, None, p)
+
+    def frame_jacobian_time_variation(self, q, qd, frame, reference="local_world_aligned",
+                                      p=None):
+        return self.kernels.frame_rates(2, frame_index(self.info, frame),
+                                        _reference(reference), 0, q, qd, None, p)
+
+    def delassus(self, q, frames, dims=6, p=None):
+        return self._task_matrix(0, q, frames, dims, p)
+
+    def operational_space_inertia(self, q, frames, dims=6, p=None):
+        return self._task_matrix(1, q, frames, dims, p)
+
+    def _task_matrix(self, which: int, q, frames, dims, p):
+        """J M^-1 J^T (which 0) or its inverse (1) from the C, the frames checked here."""
+        indices, dims = task_frames(self.info, frames), task_dims(dims)
+        if which == 1 and dims * len(indices) > self.nv:
+            raise singular_task(self.info, indices, dims, -1)
+        out, status, row = self.kernels.task_matrix(which, indices, dims, q, p)
+        if status:
+            raise singular_task(self.info, indices, dims, row)
+        return out
+
+    frame_jacobian.__doc__ = Dynamics.frame_jacobian.__doc__
+    frame_velocity.__doc__ = Dynamics.frame_velocity.__doc__
+    frame_acceleration.__doc__ = Dynamics.frame_acceleration.__doc__
+    frame_bias_acceleration.__doc__ = Dynamics.frame_bias_acceleration.__doc__
+    frame_jacobian_time_variation.__doc__ = Dynamics.frame_jacobian_time_variation.__doc__
+    delassus.__doc__ = Dynamics.delassus.__doc__
+    operational_space_inertia.__doc__ = Dynamics.operational_space_inertia.__doc__
 
     # --- derivatives: the second module ---------------------------------------------------
 
@@ -112,3 +166,14 @@ class CompiledDynamics(Dynamics):
     forward_dynamics_derivatives.__doc__ = Dynamics.forward_dynamics_derivatives.__doc__
     coriolis_matrix.__doc__ = Dynamics.coriolis_matrix.__doc__
     linearize.__doc__ = Dynamics.linearize.__doc__
+
+
+def _reference(reference) -> int:
+    code = REFERENCES.get(reference) if type(reference) is str else None
+    return reference_code(reference) if code is None else code
+
+
+def _kind(kind) -> int:
+    if kind == "classical":
+        return 0
+    return kind_code(kind)
