@@ -421,3 +421,22 @@ def test_the_c_api_has_the_task_space_functions(anymal):
     work, Lam = np.empty(12 * anymal.nv), np.empty((12, 12))
     assert osi(q, p, 4, frames, 3, work, Lam) == 0
     close(Lam, anymal.operational_space_inertia(q, FEET, 3), "C Λ", 1e-15)
+
+
+def test_the_bench_section_reports_ratios_and_the_goal():
+    from gagen.bench.report import markdown
+    from gagen.bench.taskspace import goal_notes
+
+    def row(quantity, implementation, median, ratio):
+        return {"robot": "panda (panda_hand_tcp)", "quantity": f"panda (panda_hand_tcp): "
+                f"{quantity}", "implementation": implementation, "call": "f(x)",
+                "median_us": median, "q1_us": median, "q3_us": median, "iqr_us": 0.0,
+                "ratio": ratio}
+    rows = [row("J̇ q̇", "gagen compiled", 1.0, 1.0), row("J̇ q̇", "Pinocchio", 2.0, 2.0),
+            row("Λ", "gagen compiled", 2.0, 1.0), row("Λ", "Pinocchio", 2.8, 1.4)]
+    notes = goal_notes(rows)
+    assert notes == [("Goal: task space on panda (panda_hand_tcp) at least 1.5x faster "
+                      "than Pinocchio per call: NOT met (J̇ q̇ 2.00x, Λ 1.40x).")]
+    text = markdown({"taskspace": {"rows": rows, "repeats": 3}})
+    assert "## Task space per call" in text
+    assert "| panda (panda_hand_tcp): Λ | Pinocchio | `f(x)` | 2.80 |" in text

@@ -22,6 +22,7 @@ from libc.stdlib cimport free, malloc
 
 from gagen.errors import NonFiniteStateError, SingularMassMatrixError
 from gagen.runtime.inputs import as_float_array
+from gagen.runtime.taskspace import KINDS, REFERENCES, kind_code, reference_code
 
 cnp.import_array()
 
@@ -350,13 +351,18 @@ cdef class CompiledModel(_Evaluator):
 
     cdef const gagen_model_api *api
     cdef readonly object external_forces
+    cdef dict _frame_numbers  # frame name -> number
+    cdef object _frame_index  # (frame) -> number, or the error that names the choices
 
-    def __init__(self, capsule, parameter_vector, external_forces=None):
+    def __init__(self, capsule, parameter_vector, external_forces=None, frame_numbers=None,
+                 frame_index=None):
         self.api = <const gagen_model_api *>_table(capsule, MODEL_CAPSULE)
         self._adopt(capsule, self.api.ident, self.api.np, self.api.err_nonfinite,
                     self.api.parameter_defaults)
         self.parameter_vector = parameter_vector
         self.external_forces = external_forces
+        self._frame_numbers = dict(frame_numbers or {})
+        self._frame_index = frame_index
 
     cdef object _run(self, Kernel kernel, Py_ssize_t nout, object x, object y, object z,
                      object p, str nx, str ny, str nz):
@@ -453,6 +459,10 @@ cdef class CompiledModel(_Evaluator):
         """A frame's placement (which 0: R and origin, 12 values), Jacobian (1: 6 x NV) or
         velocity (2: 6 values) at one state or stacked states; the last two in `reference`
         (0 WORLD, 1 LOCAL, 2 LOCAL_WORLD_ALIGNED)."""
+        return self._frame(which, frame, q, qd, p, reference)
+
+    cdef object _frame(self, int which, int frame, object q, object qd, object p,
+                       int reference):
         cdef const gagen_model_api *api = self.api
         if not 0 <= frame < api.nf:
             raise IndexError(f"frame {frame} out of range (0 .. {api.nf - 1})")
@@ -488,12 +498,57 @@ cdef class CompiledModel(_Evaluator):
     # --- task space: frames' accelerations, Jacobians' time variation and the
     # operational-space inertia (conventions: gagen.runtime.taskspace) --------------------
 
+    # The frame methods by name (CompiledDynamics binds them: their documentation is
+    # Dynamics's): a frame's name and the reference and kind are looked up in dicts
+    # first, anything else takes the checked path, which names what is wrong.
+
+    cdef int _frame_number(self, object frame) except -1:
+        cdef object k = self._frame_numbers.get(frame) if type(frame) is str else None
+        if k is None:
+            k = self._frame_index(frame)
+        return k
+
+    def frame_jacobian(self, q, frame, reference="local_world_aligned", p=None):
+        """The frame's Jacobian (a list of frames: theirs) in `reference`."""
+        if type(frame) is list or type(frame) is tuple:
+            return self.frame_jacobians([self._frame_index(f) for f in frame],
+                                        _reference_number(reference), q, p)
+        return self._frame(1, self._frame_number(frame), q, None, p,
+                           _reference_number(reference))
+
+    def frame_velocity(self, q, qd, frame, reference="local_world_aligned", p=None):
+        """The frame's velocity in `reference`."""
+        return self._frame(2, self._frame_number(frame), q, qd, p,
+                           _reference_number(reference))
+
+    def frame_acceleration(self, q, qd, qdd, frame, reference="local_world_aligned",
+                           kind="classical", p=None):
+        """The frame's acceleration at qdd in `reference`, classical or spatial."""
+        return self._frame_rates(0, self._frame_number(frame), _reference_number(reference),
+                                 _kind_number(kind), q, qd, qdd, p)
+
+    def frame_bias_acceleration(self, q, qd, frame, reference="local_world_aligned",
+                                kind="classical", p=None):
+        """The frame's acceleration at qdd = 0 (J̇ qd in that convention)."""
+        return self._frame_rates(1, self._frame_number(frame), _reference_number(reference),
+                                 _kind_number(kind), q, qd, None, p)
+
+    def frame_jacobian_time_variation(self, q, qd, frame, reference="local_world_aligned",
+                                      p=None):
+        """dJ/dt of the frame's Jacobian in `reference` along qd."""
+        return self._frame_rates(2, self._frame_number(frame), _reference_number(reference),
+                                 0, q, qd, None, p)
+
     def frame_rates(self, int which, int frame, int reference, int kind, q, qd, qdd=None,
                     p=None):
         """Frame `frame`'s acceleration at qdd (which 0: 6 values, kind 0 classical or 1
         spatial), its bias acceleration at qdd = 0 (1), or its Jacobian's time variation
         (2: 6 x NV), in `reference` (0 WORLD, 1 LOCAL, 2 LOCAL_WORLD_ALIGNED), at one state
         or stacked states."""
+        return self._frame_rates(which, frame, reference, kind, q, qd, qdd, p)
+
+    cdef object _frame_rates(self, int which, int frame, int reference, int kind, object q,
+                             object qd, object qdd, object p):
         cdef const gagen_model_api *api = self.api
         if not 0 <= frame < api.nf:
             raise IndexError(f"frame {frame} out of range (0 .. {api.nf - 1})")
@@ -664,11 +719,31 @@ def _frame_wrenches(frames, wrenches, int nf):
     return fr, wr
 
 
-def _frame_numbers(frames, int nf):
-    """Frame numbers as a C-contiguous int32 array (one dimension), each in 0 .. nf - 1."""
-    fr = np.ascontiguousarray(frames, dtype=np.int32).ravel()
-    if np.any(fr < 0) or np.any(fr >= nf):
-        raise IndexError(f"frame numbers must be in 0 .. {nf - 1}")
+cdef int _reference_number(object reference) except -1:
+    """A reference's number (Pinocchio's: 0 WORLD, 1 LOCAL, 2 LOCAL_WORLD_ALIGNED)."""
+    cdef object code = REFERENCES.get(reference) if type(reference) is str else None
+    return reference_code(reference) if code is None else code
+
+
+cdef int _kind_number(object kind) except -1:
+    """An acceleration kind's number (0 classical, 1 spatial)."""
+    cdef object code = KINDS.get(kind) if type(kind) is str else None
+    return kind_code(kind) if code is None else code
+
+
+cdef cnp.ndarray _frame_numbers(object frames, int nf):
+    """Frame numbers (a sequence of ints) as a fresh int32 array, each in 0 .. nf - 1."""
+    cdef Py_ssize_t k, n = len(frames)
+    cdef cnp.npy_intp dims[1]
+    dims[0] = n
+    cdef cnp.ndarray fr = cnp.PyArray_EMPTY(1, dims, cnp.NPY_INT32, 0)
+    cdef int32_t *data = <int32_t *>cnp.PyArray_DATA(fr)
+    cdef long f
+    for k in range(n):
+        f = frames[k]
+        if not 0 <= f < nf:
+            raise IndexError(f"frame {f} out of range (0 .. {nf - 1})")
+        data[k] = <int32_t>f
     return fr
 
 

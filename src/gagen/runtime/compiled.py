@@ -3,21 +3,19 @@ API of `Dynamics` (no SymPy: names and defaults come from the module's manifest)
 
 from __future__ import annotations
 
+from functools import partial
+
 from ..errors import BuildError
 from ..manifest import ModelInfo
 from .dynamics import Dynamics
-from .frames import frame_index, frame_indices
-from .taskspace import (
-    REFERENCES,
-    kind_code,
-    reference_code,
-    singular_task,
-    task_dims,
-    task_frames,
-)
+from .frames import frame_index
+from .taskspace import singular_task, task_dims, task_frames
 
 KERNEL_METHODS = ("mass_matrix", "forcing", "forward_dynamics", "inverse_dynamics",
                   "gravity", "energy", "regressor", "regressor_parameters")
+# the frames' methods, by name (gagen.runtime.taskspace has their conventions)
+FRAME_METHODS = ("frame_jacobian", "frame_velocity", "frame_acceleration",
+                 "frame_bias_acceleration", "frame_jacobian_time_variation")
 # the methods of a model's derivative module (codegen/derivatives.py), bound on first use
 DERIVATIVE_METHODS = ("inverse_dynamics_derivatives", "forward_dynamics_derivatives",
                       "coriolis_matrix", "linearize")
@@ -51,9 +49,11 @@ class CompiledDynamics(Dynamics):
         self._derivatives = derivatives
         self.derivative_module = None
         self.kernels = native().CompiledModel(module.API, self.parameter_vector,
-                                              self.external_forces)
-        for name in KERNEL_METHODS:
+                                              self.external_forces, self.info.frame_indices,
+                                              partial(frame_index, self.info))
+        for name in KERNEL_METHODS + FRAME_METHODS:
             setattr(self, name, getattr(self.kernels, name))
+        self._frame_numbers = self.info.frame_indices
 
     # frames: the C of frames.c, one call per state (stacked states in one C loop)
 
@@ -67,33 +67,7 @@ class CompiledDynamics(Dynamics):
         out = self.kernels.frame(0, frame_index(self.info, frame), q, None, p)
         return out[..., :9].reshape(out.shape[:-1] + (3, 3)), out[..., 9:].copy()
 
-    def frame_jacobian(self, q, frame, reference="local_world_aligned", p=None):
-        if isinstance(frame, (list, tuple)):
-            return self.kernels.frame_jacobians(frame_indices(self.info, frame),
-                                                _reference(reference), q, p)
-        return self.kernels.frame(1, frame_index(self.info, frame), q, None, p,
-                                  _reference(reference))
-
-    def frame_velocity(self, q, qd, frame, reference="local_world_aligned", p=None):
-        return self.kernels.frame(2, frame_index(self.info, frame), q, qd, p,
-                                  _reference(reference))
-
-    # task space: the C of taskspace.c.j2 (in frames.c)
-
-    def frame_acceleration(self, q, qd, qdd, frame, reference="local_world_aligned",
-                           kind="classical", p=None):
-        return self.kernels.frame_rates(0, frame_index(self.info, frame),
-                                        _reference(reference), _kind(kind), q, qd, qdd, p)
-
-    def frame_bias_acceleration(self, q, qd, frame, reference="local_world_aligned",
-                                kind="classical", p=None):
-        return self.kernels.frame_rates(1, frame_index(self.info, frame),
-                                        _reference(reference), _kind(kind), q, qd, None, p)
-
-    def frame_jacobian_time_variation(self, q, qd, frame, reference="local_world_aligned",
-                                      p=None):
-        return self.kernels.frame_rates(2, frame_index(self.info, frame),
-                                        _reference(reference), 0, q, qd, None, p)
+    # task space: the C of taskspace.c.j2 (in frames.c); the frames' kernels are bound
 
     def delassus(self, q, frames, dims=6, p=None):
         return self._task_matrix(0, q, frames, dims, p)
@@ -103,7 +77,12 @@ class CompiledDynamics(Dynamics):
 
     def _task_matrix(self, which: int, q, frames, dims, p):
         """J M^-1 J^T (which 0) or its inverse (1) from the C, the frames checked here."""
-        indices, dims = task_frames(self.info, frames), task_dims(dims)
+        try:  # one frame by name
+            indices = [self._frame_numbers[frames]]
+        except (KeyError, TypeError):
+            indices = task_frames(self.info, frames)
+        if type(dims) is not int or (dims != 6 and dims != 3):
+            dims = task_dims(dims)
         if which == 1 and dims * len(indices) > self.nv:
             raise singular_task(self.info, indices, dims, -1)
         out, status, row = self.kernels.task_matrix(which, indices, dims, q, p)
@@ -111,11 +90,6 @@ class CompiledDynamics(Dynamics):
             raise singular_task(self.info, indices, dims, row)
         return out
 
-    frame_jacobian.__doc__ = Dynamics.frame_jacobian.__doc__
-    frame_velocity.__doc__ = Dynamics.frame_velocity.__doc__
-    frame_acceleration.__doc__ = Dynamics.frame_acceleration.__doc__
-    frame_bias_acceleration.__doc__ = Dynamics.frame_bias_acceleration.__doc__
-    frame_jacobian_time_variation.__doc__ = Dynamics.frame_jacobian_time_variation.__doc__
     delassus.__doc__ = Dynamics.delassus.__doc__
     operational_space_inertia.__doc__ = Dynamics.operational_space_inertia.__doc__
 
@@ -167,13 +141,3 @@ class CompiledDynamics(Dynamics):
     coriolis_matrix.__doc__ = Dynamics.coriolis_matrix.__doc__
     linearize.__doc__ = Dynamics.linearize.__doc__
 
-
-def _reference(reference) -> int:
-    code = REFERENCES.get(reference) if type(reference) is str else None
-    return reference_code(reference) if code is None else code
-
-
-def _kind(kind) -> int:
-    if kind == "classical":
-        return 0
-    return kind_code(kind)
