@@ -321,6 +321,15 @@ def test_a_singular_task_is_a_clear_error_naming_its_frames(backend, cache_dir):
     with pytest.raises(gagen.SingularTaskError, match="stacked input, row 0"):
         Q = np.stack([q, q])
         dyn.operational_space_inertia(Q, [frame, frame], dims=3)
+    # two points of the base, b1's origin and b2's (welded to it): their six linear rows
+    # have rank 5 (a turn about the line through them moves neither), which rounding
+    # leaves as a pivot of either sign, as small as 1e-15 of its row's scale
+    assert [dyn.info.bodies[dyn.info.frames[dyn.frames.index(f)][1]][1] for f in
+            ("b1", "b2")] == [3, 0]
+    rng = np.random.default_rng(3)
+    for _ in range(8):
+        with pytest.raises(gagen.SingularTaskError):
+            dyn.operational_space_inertia(random_state(dyn, rng)[0], ["b1", "b2"], dims=3)
     G = dyn.delassus(q, [frame, frame], dims=6)  # defined: rank-deficient, 12 x 12
     assert G.shape == (12, 12) and np.linalg.matrix_rank(G) == 6
     with pytest.raises(gagen.SingularTaskError, match="singular"):
