@@ -165,11 +165,10 @@ def _ours_q(ref: Reference, q_pin) -> np.ndarray:
 # --------------------------------------------------------------------- the real robots
 
 @pytest.fixture(scope="module")
-def anymal(tmp_path_factory):
+def anymal(cache_dir):  # the session's cache: test_taskspace loads the same build
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", gagen.InertiaWarning)
-        return gagen.load(URDF / "anymal_c.urdf", floating_base=True,
-                          cache_dir=tmp_path_factory.mktemp("cache"))
+        return gagen.load(URDF / "anymal_c.urdf", floating_base=True, cache_dir=cache_dir)
 
 
 def test_anymal_floating_matches_pinocchio(anymal):
