@@ -32,7 +32,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..manifest import ModelInfo
-from .frames import FLOATING, PRISMATIC, REVOLUTE, pose
+from .frames import FLOATING, PRISMATIC, REVOLUTE, frame_indices, pose
+from .frames import jacobian as aligned_jacobian
 
 # Pinocchio's ReferenceFrame numbers (pin.WORLD, pin.LOCAL, pin.LOCAL_WORLD_ALIGNED); the
 # C functions take these
@@ -117,12 +118,14 @@ def _cross(a, b):
     return None if a is None or b is None else np.cross(a, b)
 
 
-def body_motion(info: ModelInfo, X: np.ndarray, qd: np.ndarray, qdd: np.ndarray | None,
-                body: int) -> tuple:
-    """(ω, v, α, a) of `body` (module docstring), each (..., 3); qdd None: q̈ = 0."""
+def path_motion(info: ModelInfo, X: np.ndarray, qd: np.ndarray, qdd: np.ndarray | None,
+                body: int) -> dict[int, tuple]:
+    """{b: (ω, v, α, a)} for `body` and its ancestors (module docstring), each (..., 3);
+    qdd None: q̈ = 0."""
     zero = np.zeros(np.broadcast_shapes(X.shape[:-1], qd.shape[:-1]) + (3,))
     omega = vel = alpha = acc = None
     origin = None
+    out = {}
     for b in path(info, body):
         o = _block(X, b, 9, 12)
         r = o if origin is None else o - origin
@@ -135,40 +138,40 @@ def body_motion(info: ModelInfo, X: np.ndarray, qd: np.ndarray, qdd: np.ndarray 
         vel = _add(vel, _cross(omega, r), u)
         omega = _add(omega, w)
         origin = o
-    return tuple(zero if x is None else zero + x for x in (omega, vel, alpha, acc))
+        out[b] = tuple(zero if x is None else zero + x for x in (omega, vel, alpha, acc))
+    return out
 
 
 def frame_motion(info: ModelInfo, X, F, k: int, qd, qdd) -> tuple:
     """(R, p, ω, v_f, α, a_f) of frame k: its placement, and the motion of its origin."""
     R, p = pose(info, X, F, k)
     body = info.frames[k][1]
-    omega, vel, alpha, acc = body_motion(info, X, qd, qdd, body)
-    if body >= 0:
-        arm = p - _block(X, body, 9, 12)
-        vel = vel + np.cross(omega, arm)
-        acc = acc + np.cross(alpha, arm) + np.cross(omega, np.cross(omega, arm))
+    if body < 0:  # welded to the world
+        zero = np.zeros(np.broadcast_shapes(X.shape[:-1], qd.shape[:-1]) + (3,))
+        return R, p, zero, zero, zero, zero
+    omega, vel, alpha, acc = path_motion(info, X, qd, qdd, body)[body]
+    arm = p - _block(X, body, 9, 12)
+    vel = vel + np.cross(omega, arm)
+    acc = acc + np.cross(alpha, arm) + np.cross(omega, np.cross(omega, arm))
     return R, p, omega, vel, alpha, acc
 
 
 # --- references ----------------------------------------------------------------------------
 
-def motion_to(reference: int, R: np.ndarray, p: np.ndarray, linear: np.ndarray,
-              angular: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A motion vector (linear at the frame's origin, angular; world axes) in `reference`.
-    R (..., 3, 3) and p (..., 3) broadcast against the vectors' leading axes (with an
-    extra axis for a Jacobian's columns: vectors (..., 3, nv) then)."""
-    if reference == LOCAL_WORLD_ALIGNED:
-        return linear, angular
+def _columns_to(reference: int, R: np.ndarray, p: np.ndarray, linear: np.ndarray,
+                angular: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A Jacobian's columns (linear rows (..., 3, nv) at the frame's origin, angular rows;
+    world axes) in `reference`: motion vectors, as `_vectors_to`."""
     if reference == LOCAL:
         Rt = np.swapaxes(R, -1, -2)
         return Rt @ linear, Rt @ angular
-    return linear + _cross_columns(p, angular), angular
+    if reference == WORLD:
+        return linear + _cross_columns(p, angular), angular
+    return linear, angular
 
 
 def _cross_columns(a: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """a × each column of B (B (..., 3, n)), or a × B for vectors (B (..., 3))."""
-    if B.ndim == a.ndim:
-        return np.cross(a, B)
+    """a × each column of B (B (..., 3, n))."""
     return np.cross(a[..., None, :], np.swapaxes(B, -1, -2)).swapaxes(-1, -2)
 
 
@@ -178,7 +181,11 @@ def velocity(info: ModelInfo, X, F, k: int, qd, reference: int) -> np.ndarray:
     return np.concatenate(_vectors_to(reference, R, p, vel, omega), axis=-1)
 
 
-def _vectors_to(reference, R, p, linear, angular):
+def _vectors_to(reference: int, R: np.ndarray, p: np.ndarray, linear: np.ndarray,
+                angular: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A motion vector (linear (..., 3) at the frame's origin, angular; world axes) in
+    `reference`: LOCAL turns it into the frame's axes, WORLD moves the linear part's point
+    to the world's origin (v_O = v_p + p × ω)."""
     if reference == LOCAL:
         Rt = np.swapaxes(R, -1, -2)
         return _apply(Rt, linear), _apply(Rt, angular)
@@ -203,13 +210,11 @@ def acceleration(info: ModelInfo, X, F, k: int, qd, qdd, reference: int,
 
 def jacobian(info: ModelInfo, X, F, k: int, nv: int, reference: int) -> np.ndarray:
     """Frame k's Jacobian (..., 6, nv) in `reference`."""
-    from .frames import jacobian as aligned
-
-    J = aligned(info, X, F, k, nv)
+    J = aligned_jacobian(info, X, F, k, nv)
     if reference == LOCAL_WORLD_ALIGNED:
         return J
     R, p = pose(info, X, F, k)
-    lin, ang = motion_to(reference, R, p, J[..., :3, :], J[..., 3:, :])
+    lin, ang = _columns_to(reference, R, p, J[..., :3, :], J[..., 3:, :])
     return np.concatenate([lin, ang], axis=-2)
 
 
@@ -219,15 +224,14 @@ def jacobian_time_variation(info: ModelInfo, X, F, k: int, qd, nv: int,
     getFrameJacobianTimeVariation): each column of the joints on the frame's path, as
     the joint's axis turns with its body (d/dt s = ω × s) and the frame's arm stretches
     (d/dt (p_f - o) = v_f - v)."""
-    from .frames import jacobian as aligned
-
     R, p, omega_f, vel_f, _, _ = frame_motion(info, X, F, k, qd, None)
-    J = aligned(info, X, F, k, nv)
+    J = aligned_jacobian(info, X, F, k, nv)
     dJ = np.zeros_like(J)
     body = info.frames[k][1]
+    motion = path_motion(info, X, qd, None, body) if body >= 0 else {}
     while body >= 0:
         parent, kind, column = info.bodies[body]
-        omega, vel, _, _ = body_motion(info, X, qd, None, body)
+        omega, vel, _, _ = motion[body]
         arm, stretch = p - _block(X, body, 9, 12), vel_f - vel
         if kind in (REVOLUTE, PRISMATIC):
             axes = [(column, _block(X, body, 12, 15), kind == REVOLUTE)]
@@ -260,16 +264,12 @@ def jacobian_time_variation(info: ModelInfo, X, F, k: int, qd, nv: int,
 def task_jacobian(info: ModelInfo, X, F, frames: list[int], nv: int, dims: int) -> np.ndarray:
     """The frames' LOCAL_WORLD_ALIGNED Jacobians' first `dims` rows, stacked: (..., m, nv)
     with m = dims · len(frames)."""
-    from .frames import jacobian as aligned
-
-    return np.concatenate([aligned(info, X, F, k, nv)[..., :dims, :] for k in frames],
-                          axis=-2)
+    return np.concatenate([aligned_jacobian(info, X, F, k, nv)[..., :dims, :]
+                           for k in frames], axis=-2)
 
 
 def task_frames(info: ModelInfo, frames) -> list[int]:
     """The indices of a task's frames (one, or a list), at least one."""
-    from .frames import frame_indices
-
     indices = frame_indices(info, frames)
     if not indices:
         raise ValueError("frames must name at least one frame")
