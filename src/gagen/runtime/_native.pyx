@@ -14,7 +14,9 @@ is gagen.runtime.dynamics.Dynamics's); gagen.sim runs CompiledSimulation and Com
 
 import numpy as np
 cimport numpy as cnp
+from cpython.dict cimport PyDict_GetItem
 from cpython.exc cimport PyErr_CheckSignals
+from cpython.object cimport PyObject
 from cpython.pycapsule cimport PyCapsule_GetPointer
 from libc.math cimport NAN, isfinite
 from libc.stdint cimport int32_t, int64_t
@@ -470,7 +472,7 @@ cdef class CompiledModel(_Evaluator):
             raise ValueError(f"reference {reference} is not 0, 1 or 2")
         cdef cnp.ndarray a = _state(q, "q", api.nq)
         cdef cnp.ndarray b = _state(qd, "qd", api.nv) if which == 2 else a
-        cdef list keep = []
+        cdef list keep = None if p is None else []
         cdef const double *pp = self._parameter_data(p, keep)
         cdef Py_ssize_t rows = _rows(a, -1, "q")
         if which == 2:
@@ -482,17 +484,12 @@ cdef class CompiledModel(_Evaluator):
         cdef double *pa_ = _data(a)
         cdef double *pb = _data(b)
         cdef double *po = _data(out)
-        cdef Py_ssize_t sa = _step(a), sb = _step(b), i, count = rows if rows >= 0 else 1
-        with nogil:
-            for i in range(count):
-                if which == 0:
-                    api.frame_placement(pa_ + i * sa, pp, frame, po + i * nout,
-                                        po + i * nout + 9)
-                elif which == 1:
-                    api.frame_jacobian(pa_ + i * sa, pp, frame, reference, po + i * nout)
-                else:
-                    api.frame_velocity(pa_ + i * sa, pb + i * sb, pp, frame, reference,
-                                       po + i * nout)
+        cdef Py_ssize_t sa = _step(a), sb = _step(b)
+        if rows < 0:  # one state: releasing the GIL would cost more than the kernel
+            _frame_loop(api, which, frame, reference, pa_, sa, pb, sb, pp, po, nout, 1)
+        else:
+            with nogil:
+                _frame_loop(api, which, frame, reference, pa_, sa, pb, sb, pp, po, nout, rows)
         return out
 
     # --- task space: frames' accelerations, Jacobians' time variation and the
@@ -503,10 +500,11 @@ cdef class CompiledModel(_Evaluator):
     # first, anything else takes the checked path, which names what is wrong.
 
     cdef int _frame_number(self, object frame) except -1:
-        cdef object k = self._frame_numbers.get(frame) if type(frame) is str else None
-        if k is None:
-            k = self._frame_index(frame)
-        return k
+        cdef PyObject *k = PyDict_GetItem(self._frame_numbers, frame) \
+            if type(frame) is str else NULL
+        if k == NULL:
+            return self._frame_index(frame)
+        return <object>k
 
     def frame_jacobian(self, q, frame, reference="local_world_aligned", p=None):
         """The frame's Jacobian (a list of frames: theirs) in `reference`."""
@@ -557,7 +555,7 @@ cdef class CompiledModel(_Evaluator):
         cdef cnp.ndarray a = _state(q, "q", api.nq)
         cdef cnp.ndarray b = _state(qd, "qd", api.nv)
         cdef cnp.ndarray c = _state(qdd, "qdd", api.nv) if which == 0 else b
-        cdef list keep = []
+        cdef list keep = None if p is None else []
         cdef const double *pp = self._parameter_data(p, keep)
         cdef Py_ssize_t rows = _rows(b, _rows(a, -1, "q"), "qd")
         if which == 0:
@@ -568,17 +566,14 @@ cdef class CompiledModel(_Evaluator):
         cdef double *pb = _data(b)
         cdef double *pc = _data(c) if which == 0 else NULL
         cdef double *po = _data(out)
-        cdef Py_ssize_t sa = _step(a), sb = _step(b), sc = _step(c), i
-        cdef Py_ssize_t count = rows if rows >= 0 else 1
-        with nogil:
-            for i in range(count):
-                if which == 2:
-                    api.frame_jacobian_time_variation(pa_ + i * sa, pb + i * sb, pp, frame,
-                                                      reference, po + i * nout)
-                else:
-                    api.frame_acceleration(pa_ + i * sa, pb + i * sb,
-                                           pc + i * sc if pc != NULL else NULL, pp, frame,
-                                           reference, kind, po + i * nout)
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), sc = _step(c)
+        if rows < 0:  # one state: releasing the GIL would cost more than the kernel
+            _frame_rates_loop(api, which, frame, reference, kind, pa_, sa, pb, sb, pc, sc,
+                              pp, po, nout, 1)
+        else:
+            with nogil:
+                _frame_rates_loop(api, which, frame, reference, kind, pa_, sa, pb, sb, pc,
+                                  sc, pp, po, nout, rows)
         return out
 
     def frame_jacobians(self, frames, int reference, q, p=None):
@@ -719,16 +714,55 @@ def _frame_wrenches(frames, wrenches, int nf):
     return fr, wr
 
 
+cdef dict _REFERENCES = REFERENCES
+cdef dict _KINDS = KINDS
+
+
 cdef int _reference_number(object reference) except -1:
     """A reference's number (Pinocchio's: 0 WORLD, 1 LOCAL, 2 LOCAL_WORLD_ALIGNED)."""
-    cdef object code = REFERENCES.get(reference) if type(reference) is str else None
-    return reference_code(reference) if code is None else code
+    cdef PyObject *code = PyDict_GetItem(_REFERENCES, reference) \
+        if type(reference) is str else NULL
+    return reference_code(reference) if code == NULL else <object>code
 
 
 cdef int _kind_number(object kind) except -1:
     """An acceleration kind's number (0 classical, 1 spatial)."""
-    cdef object code = KINDS.get(kind) if type(kind) is str else None
-    return kind_code(kind) if code is None else code
+    cdef PyObject *code = PyDict_GetItem(_KINDS, kind) if type(kind) is str else NULL
+    return kind_code(kind) if code == NULL else <object>code
+
+
+cdef void _frame_loop(const gagen_model_api *api, int which, int frame, int reference,
+                      const double *q, Py_ssize_t sq, const double *qd, Py_ssize_t sqd,
+                      const double *p, double *out, Py_ssize_t nout,
+                      Py_ssize_t count) noexcept nogil:
+    """A frame kernel (which 0 placement, 1 Jacobian, 2 velocity) at `count` states."""
+    cdef Py_ssize_t i
+    for i in range(count):
+        if which == 0:
+            api.frame_placement(q + i * sq, p, frame, out + i * nout, out + i * nout + 9)
+        elif which == 1:
+            api.frame_jacobian(q + i * sq, p, frame, reference, out + i * nout)
+        else:
+            api.frame_velocity(q + i * sq, qd + i * sqd, p, frame, reference,
+                               out + i * nout)
+
+
+cdef void _frame_rates_loop(const gagen_model_api *api, int which, int frame, int reference,
+                            int kind, const double *q, Py_ssize_t sq, const double *qd,
+                            Py_ssize_t sqd, const double *qdd, Py_ssize_t sqdd,
+                            const double *p, double *out, Py_ssize_t nout,
+                            Py_ssize_t count) noexcept nogil:
+    """A frame's acceleration (which 0), bias acceleration (1, qdd NULL) or Jacobian's
+    time variation (2) at `count` states."""
+    cdef Py_ssize_t i
+    for i in range(count):
+        if which == 2:
+            api.frame_jacobian_time_variation(q + i * sq, qd + i * sqd, p, frame, reference,
+                                              out + i * nout)
+        else:
+            api.frame_acceleration(q + i * sq, qd + i * sqd,
+                                   qdd + i * sqdd if qdd != NULL else NULL, p, frame,
+                                   reference, kind, out + i * nout)
 
 
 cdef cnp.ndarray _frame_numbers(object frames, int nf):
