@@ -54,6 +54,11 @@ static const gagen_model_api api = {
     .regressor_parameters = rrr_regressor_parameters,
     .simulate = rrr_simulate,
     .control_torques = rrr_control_torques,
+    .frame_jacobians = rrr_frame_jacobians,
+    .frame_acceleration = rrr_frame_acceleration,
+    .frame_jacobian_time_variation = rrr_frame_jacobian_time_variation,
+    .delassus = rrr_delassus,
+    .operational_space_inertia = rrr_operational_space_inertia,
 };
 
 static struct PyModuleDef module_definition = {
@@ -73,7 +78,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "c815c312748dcbccf38561d6fe516835ba656b79f6d5b9d7d061032126d605af") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "d081f5cf726ba7f67a4a732b961e4848de17159d65c0f9e253ebe5f3aa9272b8") < 0) {
         Py_DECREF(module);
         return NULL;
     }
