@@ -14,6 +14,7 @@ acceleration is the second derivative of the frame's origin, and Λ J M⁻¹ J�
 from __future__ import annotations
 
 import ctypes
+import functools
 import warnings
 from pathlib import Path
 
@@ -160,6 +161,14 @@ TREES = {"fixed3": fixed_tree, "floating1": lambda: floating_tree(1),
          "floating2": lambda: floating_tree(2)}
 
 
+@functools.cache
+def load_tree(tree: str, backend: str, cache_dir: Path):
+    """A tree's dynamics, derived once per test session (the lambdify backend derives on
+    every load; the compiled one reads the session's cache)."""
+    options = {"cache_dir": cache_dir} if backend == "compiled" else {}
+    return gagen.load(TREES[tree](), backend=backend, **options)
+
+
 def test_the_trees_have_every_joint_type():
     types = {b.joint.type for tree in TREES.values() for b in tree().bodies}
     assert types == {"revolute", "continuous", "prismatic", "fixed", "floating"}
@@ -168,10 +177,8 @@ def test_the_trees_have_every_joint_type():
 @pytest.mark.parametrize("backend", ["lambdify", "compiled"])
 @pytest.mark.parametrize("tree", list(TREES))
 def test_random_trees_match_pinocchio(tree, backend, cache_dir):
-    model = TREES[tree]()
-    options = {"cache_dir": cache_dir} if backend == "compiled" else {}
-    dyn = gagen.load(model, backend=backend, **options)
-    twin = Twin(dyn, pinocchio_model(numeric_model(model)))
+    dyn = load_tree(tree, backend, cache_dir)
+    twin = Twin(dyn, pinocchio_model(numeric_model(TREES[tree]())))
     check_frames_against_pinocchio(dyn, twin, dyn.frames, seed=len(tree))
 
 
@@ -310,9 +317,7 @@ def test_delassus_matches_pinocchio_minverse(anymal):
 
 @pytest.mark.parametrize("backend", ["lambdify", "compiled"])
 def test_a_singular_task_is_a_clear_error_naming_its_frames(backend, cache_dir):
-    model = floating_tree(1)
-    options = {"cache_dir": cache_dir} if backend == "compiled" else {}
-    dyn = gagen.load(model, backend=backend, **options)
+    dyn = load_tree("floating1", backend, cache_dir)
     q, _, _ = random_state(dyn, np.random.default_rng(0))
     frame = dyn.frames[-1]
     dyn.operational_space_inertia(q, frame)  # one frame's six rows: fine
@@ -340,7 +345,7 @@ def test_a_singular_task_is_a_clear_error_naming_its_frames(backend, cache_dir):
         dyn.delassus(q, [])
     with pytest.raises(gagen.NonFiniteStateError):
         dyn.operational_space_inertia(np.full(dyn.nq, np.nan), frame)
-    tree = gagen.load(fixed_tree(), backend=backend, **options)
+    tree = load_tree("fixed3", backend, cache_dir)
     massless = {name: 0.0 for name in tree.parameters if name.startswith("m")}
     with pytest.raises(gagen.SingularMassMatrixError):
         tree.delassus(np.zeros(tree.nq), tree.frames[-1], p=massless)
@@ -350,9 +355,7 @@ def test_a_singular_task_is_a_clear_error_naming_its_frames(backend, cache_dir):
 
 @pytest.mark.parametrize("backend", ["lambdify", "compiled"])
 def test_stacked_inputs_give_stacked_fresh_outputs(backend, cache_dir):
-    model = floating_tree(2)
-    options = {"cache_dir": cache_dir} if backend == "compiled" else {}
-    dyn = gagen.load(model, backend=backend, **options)
+    dyn = load_tree("floating2", backend, cache_dir)
     rng = np.random.default_rng(5)
     states = [random_state(dyn, rng) for _ in range(3)]
     Q, V, A = (np.stack([s[k] for s in states]) for k in range(3))
