@@ -164,6 +164,29 @@ int rrr_inverse_dynamics_ext(const double *q, const double *qd, const double *qd
                                      const double *p, int count, const int *frames,
                                      const double *wrenches, double *tau);
 
+/* Centre of mass and centroidal dynamics (Pinocchio's centerOfMass, ccrba, dccrba): 6-vectors
+ * and the rows of 6 x 3 matrices (row-major) are linear then angular, in world axes, about
+ * the centre of mass; the angular part of h_g is the angular momentum about it. Bodies welded
+ * to the world are not part of the robot's mass. */
+/* com: the centre of mass in the world (3) */
+void rrr_center_of_mass(const double *q, const double *p, double *com);
+/* vcom: its velocity (3) */
+void rrr_com_velocity(const double *q, const double *qd, const double *p,
+                              double *vcom);
+/* J: 3 x 3, vcom = J qd */
+void rrr_com_jacobian(const double *q, const double *p, double *J);
+/* Ag: the centroidal momentum matrix, 6 x 3, h_g = Ag qd */
+void rrr_centroidal_map(const double *q, const double *p, double *Ag);
+/* hg: the centroidal momentum (6): linear momentum, angular momentum about the centre */
+void rrr_centroidal_momentum(const double *q, const double *qd, const double *p,
+                                     double *hg);
+/* dAg: d/dt Ag, 6 x 3 */
+void rrr_centroidal_map_time_variation(const double *q, const double *qd,
+                                               const double *p, double *dAg);
+/* b = dAg qd (6): d/dt h_g = Ag qdd + b */
+void rrr_centroidal_bias(const double *q, const double *qd, const double *p,
+                                 double *b);
+
 #ifdef __cplusplus
 }
 #endif

@@ -9,7 +9,13 @@
 
 from __future__ import annotations
 
+import os
+import sys
+import warnings
+
 import numpy as np
+
+_PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
 
 
 class ModelError(ValueError):
@@ -19,6 +25,20 @@ class ModelError(ValueError):
         self.source, self.element, self.reason = source, element, reason
         where = f"{source}: {element}" if element else source
         super().__init__(one_line(f"{where}: {reason}"))
+
+
+def warn_user(message: str, category: type[Warning]) -> None:
+    """`warnings.warn` attributed to the user's line: the first caller outside gagen (and
+    outside Python's import machinery), however deep in gagen the warning arises, so that
+    the location shown, and the filters that match it, are the user's own code."""
+    level, frame = 2, sys._getframe(1)
+    while frame is not None and _inside_gagen(frame.f_code.co_filename):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(message, category, stacklevel=level)
+
+
+def _inside_gagen(filename: str) -> bool:
+    return filename.startswith((_PACKAGE, "<frozen importlib"))
 
 
 def one_line(text: str) -> str:

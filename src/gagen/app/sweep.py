@@ -25,15 +25,18 @@ import csv
 import fnmatch
 import logging
 import math
+import os
 import re
+import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ..csvtext import text_cell
 from ..sim.batch import BatchPlan, blocks, prepare_batch, run_batch
-from .runs import load_dynamics, output_folder
+from .runs import default_out_dir, load_dynamics
 
 log = logging.getLogger(__name__)
 
@@ -80,6 +83,9 @@ def parse_variation(text: str) -> Variation:
                          "(0 <= P < 100)") from None
     if not (math.isfinite(low) and math.isfinite(high) and low <= high):
         raise ValueError(f"--vary {text!r}: LO and HI must be finite with LO <= HI")
+    if not math.isfinite(high - low):
+        raise ValueError(f"--vary {text!r}: HI - LO overflows; the range must be narrower "
+                         "than the largest float")
     return Variation(name, coordinate, low=low, high=high, text=text)
 
 
@@ -215,7 +221,131 @@ def default_out(model) -> Path:
     import importlib.util
 
     name = "sweep.zarr" if importlib.util.find_spec("zarr") else "sweep.npz"
-    return output_folder(None, model) / name
+    return default_out_dir(model) / name  # created when the sweep writes, not before
+
+
+# --------------------------------------------------------------- will it fit? (before anything)
+
+# What one run keeps in memory besides its results, beyond its inputs' numbers: a PD
+# controller of its own (a Python object and three arrays) when gains or targets vary.
+CONTROLLER_BYTES = 1024
+
+
+@dataclass(frozen=True)
+class StoreSize:
+    """What a sweep will hold, in bytes: `results` (q, qd, tau of every run), `inputs` (each
+    run's q0, qd0, parameters, gains, target and statistics, as stored), and `memory`
+    (what the process holds besides an .npz store: the draws and the batch's tables,
+    about three copies of the inputs, the final states, one block of results, and the
+    runs' own controllers)."""
+
+    results: int
+    inputs: int
+    memory: int
+
+    def in_memory(self, suffix: str) -> int:
+        return self.memory + (self.results + self.inputs if suffix == ".npz" else 0)
+
+    @property
+    def on_disk(self) -> int:
+        return self.results + self.inputs  # uncompressed: the worst case
+
+
+def store_size(runs: int, points: int, nq: int, nv: int, parameters: int,
+               per_run_controllers: bool = False) -> StoreSize:
+    """The sizes of a sweep of `runs` runs of `points` samples (StoreSize)."""
+    results = 8 * runs * points * (nq + 2 * nv)
+    inputs = 8 * runs * (nq + 4 * nv + parameters + 4)
+    block = min(results, BLOCK_BYTES)
+    memory = 3 * inputs + 8 * runs * nv + block + (
+        CONTROLLER_BYTES * runs if per_run_controllers else 0)
+    return StoreSize(results, inputs, memory)
+
+
+def check_store_fits(path: Path, runs: int, points: int, nq: int, nv: int, parameters: int,
+                     per_run_controllers: bool = False) -> None:
+    """Refuse (ValueError naming --runs and --points) a sweep whose store cannot fit: in
+    memory for .npz (and for every store, the inputs and one block), on disk for both."""
+    size = store_size(runs, points, nq, nv, parameters, per_run_controllers)
+    suffix = path.suffix.lower()
+    shape = (f"--runs {runs:,} x --points {points:,} x {nq + 2 * nv} values (q, qd, tau of "
+             f"{nv} coordinates)")
+    need, free = size.in_memory(suffix), available_memory()
+    if free is not None and need > free:
+        advice = ("write --out FILE.zarr (streamed to disk) or use fewer --runs or --points"
+                  if suffix == ".npz" else "use fewer --runs")
+        raise ValueError(f"{shape}: the sweep needs {_bytes(need)} of memory"
+                         + (" (an .npz store is kept in memory until written)"
+                            if suffix == ".npz" else " (the runs' inputs and one block)")
+                         + f", and {_bytes(free)} is available: {advice}")
+    disk = free_disk(path)
+    if disk is not None and size.on_disk > disk:
+        raise ValueError(f"{shape}: --out {path} needs up to {_bytes(size.on_disk)} on disk "
+                         f"(uncompressed), and {_bytes(disk)} is free there: use fewer --runs "
+                         "or --points, or another folder")
+
+
+def available_memory() -> int | None:
+    """Bytes of memory this process can still take: the system's available memory, or
+    the cgroup's limit less its use (a container) if lower; None where neither is known."""
+    values = []
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                values.append(int(line.split()[1]) * 1024)
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        used = int(Path("/sys/fs/cgroup/memory.current").read_text().strip())
+        if limit.isdigit():
+            values.append(max(0, int(limit) - used))
+    except (OSError, ValueError):
+        pass
+    if not values:
+        try:
+            values.append(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+        except (ValueError, OSError, AttributeError):
+            pass
+    room = _address_space_left()
+    if room is not None:
+        values.append(room)
+    return min(values) if values else None
+
+
+def _address_space_left() -> int | None:
+    """What this process's address-space limit (ulimit -v) leaves, or None (no limit)."""
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft == resource.RLIM_INFINITY:
+            return None
+        status = Path("/proc/self/status").read_text()
+        size = next(int(line.split()[1]) * 1024 for line in status.splitlines()
+                    if line.startswith("VmSize:"))
+        return max(0, soft - size)
+    except (ImportError, OSError, ValueError, StopIteration):
+        return None
+
+
+def free_disk(path: Path) -> int | None:
+    """Free bytes on the file system `path` would be written to (its nearest existing
+    folder); None where it cannot be told."""
+    folder = Path(os.path.abspath(path)).parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        return shutil.disk_usage(folder).free
+    except OSError:
+        return None
+
+
+def _bytes(count: int) -> str:
+    for unit, size in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if count >= size:
+            return f"{count / size:,.1f} {unit}"
+    return f"{count} bytes"
 
 
 # ------------------------------------------------------------------------------- sweep
@@ -240,13 +370,28 @@ def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
               rtol: float = 1e-6, atol: float = 1e-8, step: float = 1e-3,
               threads: int | None = None, scheduler: str | None = None,
               out: str | Path | None = None, cache_dir=None, plot: bool = True,
-              block_runs: int | None = None) -> SweepRun:
+              block_runs: int | None = None, html: bool = False, html_runs=None,
+              html_mode: str = "overlay", package_dirs=None) -> SweepRun:
     """Run `runs` simulations of `model` under the `simulate` command's controller, with the
-    --vary draws; stream them to `out` in blocks; plot the fan and write the statistics."""
+    --vary draws; stream them to `out` in blocks; plot the fan and write the statistics.
+
+    `html` also writes `out`'s stem + .html: the runs `html_runs` (default: the nominal run,
+    then the first HTML_RUNS - 1 runs that reached the end) in 3-D, overlaid with all but
+    the first ghosted, or one after the other (`html_mode` "sequence")."""
+    from ..model.resolve import resolve_model
     from ..sim.controllers import PD, default_controller
     from ..sim.simulate import simulate
 
     parsed = [parse_variation(text) for text in variations]
+    for i in html_runs or ():
+        if not 0 <= i < runs:
+            raise ValueError(f"--html-runs {i}: there are runs 0 to {runs - 1}")
+    if out:  # a first look with one coordinate, before the model is even read
+        check_store_fits(Path(out), runs, points, 1, 1, 0)
+    model = resolve_model(model)
+    path = Path(out) if out else default_out(model)
+    check_store_fits(path, runs, points, model.nq, model.dof, len(model.parameters),
+                     per_run_controllers=any(v.name in ("kp", "kd", "target") for v in parsed))
     model, dyn = load_dynamics(model, "compiled", cache_dir)
     nominal = default_controller(dyn)
     draws = draw_inputs(parsed, runs, dyn, model, nominal, seed)
@@ -264,7 +409,6 @@ def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
                          **options)
     nominal_run = simulate(dyn, span, np.zeros(dyn.n), None, nominal, method=method, rtol=rtol,
                            atol=atol, t_eval=t_eval, **options)
-    path = Path(out) if out else default_out(model)
     path.parent.mkdir(parents=True, exist_ok=True)
     attrs = {"model": model.name, "coordinates": list(dyn.coordinates),
              "parameters": list(dyn.parameters), "method": method, "rtol": rtol,
@@ -276,8 +420,9 @@ def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
              f"block(s) of up to {size:,} runs, to {path}")
     start = time.perf_counter()
     client = _client(scheduler)
+    picked = PickedRuns(html_runs, HTML_RUNS - 1) if html else None
     try:
-        final, fan, failures = _run_blocks(dyn, plan, store, size, threads, client)
+        final, fan, failures = _run_blocks(dyn, plan, store, size, threads, client, picked)
     finally:
         if client is not None:
             client.close()
@@ -293,12 +438,63 @@ def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
         log.info("plotting...")
         run.files.append(fig2_fan(t_eval, fan, nominal_run.q, model,
                                   path.with_name(f"{path.stem}_fan.png"), total=runs))
+    if picked is not None:
+        run.files.append(_write_html(path.with_name(f"{path.stem}.html"), dyn, plan,
+                                     nominal_run, picked, html_runs is None, html_mode,
+                                     package_dirs))
     return run
 
 
-def _run_blocks(dyn, plan: BatchPlan, store, size: int, threads, client):
+HTML_RUNS = 10  # runs the HTML file shows by default (the nominal one and 9 more)
+
+
+class PickedRuns:
+    """The runs the HTML file shows, kept block by block as the sweep goes: the runs
+    `wanted`, or the first `count` runs that reached the end."""
+
+    def __init__(self, wanted, count: int):
+        self.wanted = None if wanted is None else list(dict.fromkeys(wanted))
+        self.count = count
+        self.q: dict[int, np.ndarray] = {}
+
+    def take(self, start: int, res) -> None:
+        if self.wanted is None:
+            for i in np.flatnonzero(res.ok):
+                if len(self.q) >= self.count:
+                    return
+                self.q[start + int(i)] = np.array(res.q[i])
+            return
+        for i in self.wanted:
+            if start <= i < start + len(res.ok):
+                if res.ok[i - start]:
+                    self.q[i] = np.array(res.q[i - start])
+                else:
+                    log.warning(f"--html-runs {i}: the run did not reach the end; left out "
+                                "of the HTML file")
+
+
+def _write_html(path: Path, dyn, plan: BatchPlan, nominal, picked: PickedRuns,
+                with_nominal: bool, mode: str, package_dirs) -> Path:
+    from ..viewer import write_html
+
+    order = [i for i in (picked.wanted or sorted(picked.q)) if i in picked.q]
+    q = [picked.q[i] for i in order]
+    p = [plan.p[0 if plan.p.shape[0] == 1 else i] for i in order]
+    labels = [f"run {i}" for i in order]
+    if with_nominal:
+        q, p, labels = [nominal.q, *q], [nominal.p, *p], ["nominal", *labels]
+    if not q:
+        raise ValueError("--html: none of the chosen runs reached the end")
+    log.info(f"writing the 3-D playback of {len(q)} runs ({path.name})...")
+    return write_html(path, dyn, nominal.t, np.array(q), p, mode=mode, labels=labels,
+                      package_dirs=package_dirs)
+
+
+def _run_blocks(dyn, plan: BatchPlan, store, size: int, threads, client,
+                picked: PickedRuns | None = None):
     """Run the plan block by block into the store: (final q (N, n), NaN for failed runs;
-    the first FAN_RUNS runs' q; the messages of up to FAILURES_KEPT failed runs)."""
+    the first FAN_RUNS runs' q; the messages of up to FAILURES_KEPT failed runs); the
+    runs of the HTML file go to `picked`."""
     runs = plan.runs
     progress = ProgressBar(runs)
     final = np.full((runs, dyn.n), np.nan)
@@ -313,6 +509,8 @@ def _run_blocks(dyn, plan: BatchPlan, store, size: int, threads, client):
             failures[str(a + i)] = res.message[i]
         if fan is None:
             fan = res.q[:FAN_RUNS].copy()
+        if picked is not None:
+            picked.take(a, res)
     return final, fan, failures
 
 
@@ -405,7 +603,7 @@ def write_statistics(run: SweepRun, path: Path) -> Path:
         writer = csv.writer(fh)
         writer.writerow(STAT_COLUMNS)
         for row in run.statistics:
-            writer.writerow([row.get(c, "") if c in ("coordinate", "unit")
+            writer.writerow([text_cell(row.get(c, "")) if c in ("coordinate", "unit")
                              else repr(float(row[c])) if c in row else "" for c in STAT_COLUMNS])
     return path
 

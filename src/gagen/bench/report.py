@@ -242,6 +242,14 @@ def markdown(results: dict, images: dict | None = None) -> str:
         "the same URDF with a floating joint and no contacts (kinematics, M, bias forces and "
         f"qacc in one call), {fl.get('repeats', '?')} interleaved repeats; ratios to gagen.",
         percall_table, None, images)
+    cg = results.get("centroidal", {})
+    lines += _section(
+        results, "centroidal", "Centroidal dynamics per call: ANYmal C",
+        "The centre of mass, A_g (at the centre of mass, world axes, linear first), its bias "
+        "d/dt A_g qd and d/dt A_g against Pinocchio's `computeCentroidalMap`, `ccrba`, "
+        "`dccrba` (A_g and d/dt A_g), `computeCentroidalMapTimeVariation` and `centerOfMass` "
+        f"on its own URDF parse (FreeFlyer), {cg.get('repeats', '?')} interleaved repeats; "
+        "ratios to gagen.", percall_table, None, images)
     rg = results.get("regressor", {})
     lines += _section(
         results, "regressor", "The regressor and identification on the Panda",

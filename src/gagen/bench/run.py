@@ -4,7 +4,8 @@ Sections: per call on rrr (gagen's backends, Pinocchio, PyDy, plain SymPy), batc
 forward dynamics, the paper's 5-s simulation with each integrator, the scaling study
 (cold builds of chains and URDF robots), the derivatives (per call on rrr and the Panda
 against Pinocchio and central differences; the derivative module's cold build) and, with
---full, the Panda against Pinocchio.
+--full, the Panda, the floating bases, the regressor and the centroidal dynamics against
+Pinocchio.
 Writes results.json (after every section, so an interrupted run keeps what it measured),
 report.md and the PNG plots into the output folder.
 """
@@ -26,7 +27,7 @@ from . import peers
 from .common import PANDA, Progress, compiled, find_urdf_dir, machine_info, optional
 
 SECTIONS = ("percall", "batched", "simulation", "throughput", "scaling", "derivatives",
-            "panda", "floating", "regressor",
+            "panda", "floating", "regressor", "centroidal",
             "taskspace")
 
 
@@ -259,6 +260,22 @@ class Bench:
         rows = floating_rows(folder, self.scratch / "floating", s.panda_repeats, s.target_s,
                              progress=lambda text: self.progress("floating", text))
         return {"rows": rows, "repeats": s.panda_repeats}
+    def centroidal(self) -> dict:
+        from .centroidal import ROBOT, centroidal_rows, goal_notes
+
+        s = self.settings
+        folder = find_urdf_dir(self.urdf_dir, needed=ROBOT)
+        if folder is None:
+            note = f"{ROBOT} was not found: the centroidal section is skipped (--urdf-dir)"
+            self.results["notes"].append(note)
+            return {"rows": [], "skipped": note}
+        rows = centroidal_rows(folder, self.scratch / "centroidal", s.panda_repeats,
+                               s.target_s, progress=lambda text: self.progress("centroidal",
+                                                                               text))
+        for note in goal_notes(rows):
+            self._note("centroidal", note)
+        return {"rows": rows, "repeats": s.panda_repeats}
+
     def taskspace(self) -> dict:
         from .common import PANDA
         from .taskspace import goal_notes, taskspace_rows
@@ -369,7 +386,7 @@ class Bench:
         titles = {"percall": "per call", "batched": "batched", "simulation": "simulation",
                   "throughput": "throughput", "scaling": "scaling",
                   "derivatives": "derivatives", "panda": "panda", "floating": "floating",
-                  "regressor": "regressor",
+                  "regressor": "regressor", "centroidal": "centroidal",
                   "taskspace": "task space"}
         try:
             if {"percall", "batched", "simulation", "throughput"} & set(self.settings.sections):

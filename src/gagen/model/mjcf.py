@@ -25,7 +25,6 @@ loss and armature are returned by `joint_terms`.
 
 from __future__ import annotations
 
-import warnings
 from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
@@ -33,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import sympy as sp
 
-from ..errors import ModelError, one_line
+from ..errors import ModelError, one_line, warn_user
 from .inputs import MAX_BODIES, name_field, quote
 from .merge import merge_fixed_joints, symmetric
 from .mjcf_files import scan_mjcf
@@ -74,11 +73,13 @@ def compile_mjcf(path: str | Path):
     try:
         with _warnings_collected(mujoco, notes):
             mj = mujoco.MjModel.from_xml_path(source)
-    except (ValueError, RuntimeError, mujoco.FatalError) as exc:
-        raise ModelError(source, "MuJoCo's compiler", _shortened(str(exc))) from None
+    except MemoryError:
+        raise ModelError(source, "MuJoCo's compiler", "ran out of memory compiling the "
+                         "model") from None
+    except Exception as exc:  # noqa: BLE001 - every error of MuJoCo's is the file's
+        raise ModelError(source, "MuJoCo's compiler", _compile_error(exc)) from None
     for note in notes:
-        warnings.warn(one_line(f"{source}: MuJoCo's compiler: {_shortened(note)}"),
-                      stacklevel=2)
+        warn_user(one_line(f"{source}: MuJoCo's compiler: {_shortened(note)}"), UserWarning)
     if mj.nbody - 1 > MAX_BODIES:
         raise ModelError(source, "<worldbody>", f"{mj.nbody - 1} bodies; gagen builds robots "
                          f"of at most {MAX_BODIES} bodies")
@@ -95,6 +96,16 @@ def _warnings_collected(mujoco, into: list[str]):
         yield
     finally:
         mujoco.set_mju_user_warning(previous)
+
+
+def _compile_error(exc: Exception) -> str:
+    """MuJoCo's message, or what its bindings say when the C++ threw something they do not
+    translate (pybind11's "Caught an unknown exception!", an allocation that failed)."""
+    text = _shortened(str(exc))
+    if not text or "unknown exception" in text.lower():
+        return (f"failed without saying why ({type(exc).__name__}: {text or 'no message'}; "
+                "often memory running out)")
+    return text
 
 
 def _shortened(message: str) -> str:
@@ -142,6 +153,23 @@ def _with_joint_terms(bodies: list[Body], terms: dict[str, dict[str, float]]) ->
                 key: _number(value) for key, value in values.items()}))
         out.append(body)
     return out
+
+
+def body_frames(mj, source: str = "<mjcf>") -> list[tuple[str, np.ndarray]]:
+    """Per MuJoCo body id: the gagen frame named after it (`world` for body 0) and where
+    MuJoCo's body frame sits in that frame, a translation along the body's axes. gagen's
+    frame of a body is its joint frame, at the anchor of its last hinge or slide joint
+    (`model_from_mjmodel`), so MuJoCo's body frame is at minus that anchor; a body without
+    a joint, or on a free joint, has its frame where MuJoCo has it."""
+    names = _Names(mj, source)
+    frames = [(WORLD, np.zeros(3))]
+    for b in range(1, mj.nbody):
+        first, count = int(mj.body_jntadr[b]), int(mj.body_jntnum[b])
+        anchor = np.zeros(3)
+        if count and int(mj.jnt_type[first]) != _FREE:
+            anchor = np.array(mj.jnt_pos[first + count - 1], dtype=float)
+        frames.append((names.body(b), -anchor))
+    return frames
 
 
 def joint_terms(mj, source: str = "<mjcf>") -> dict[str, dict[str, float]]:
@@ -299,7 +327,8 @@ def _with_mass(body: Body, mj, b: int, anchor: np.ndarray, source: str, strict: 
 def _gravity(mj) -> tuple[float, list[sp.Expr]]:
     """(g, unit direction of gravity): gravity is -g times the negated direction."""
     gravity = np.asarray(mj.opt.gravity, dtype=float)
-    g = float(np.linalg.norm(gravity))
+    scale = float(np.abs(gravity).max())
+    g = scale * float(np.linalg.norm(gravity / scale)) if scale > 0 else 0.0  # no overflow
     if g == 0.0 or int(mj.opt.disableflags) & _GRAVITY_DISABLED:
         return 0.0, [sp.Integer(0), sp.Integer(0), sp.Integer(1)]
     return g, exact_units(-gravity / g)

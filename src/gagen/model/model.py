@@ -11,13 +11,12 @@ import contextlib
 import contextvars
 import hashlib
 import math
-import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 import sympy as sp
 
-from ..errors import InertiaWarning, ModelError, one_line
+from ..errors import InertiaWarning, ModelError, one_line, warn_user
 from ..manifest import FRICTION_WIDTH
 
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating")
@@ -507,10 +506,9 @@ def check_model_inertias(model: Model, strict: bool = False, noun: str = "body",
                 raise ModelError(model.source, element, f"{defect}; refused because "
                                  f"strict=True ({unit_text} has a physical combined inertia: "
                                  "load with strict=False to accept it with a warning)")
-            warnings.warn(one_line(f"{model.source}: {element}: {defect}; accepted: "
-                                   f"{unit_text} has a physical combined inertia, which is "
-                                   "what moves (strict=True refuses it)"),
-                          InertiaWarning, stacklevel=2)
+            warn_user(one_line(f"{model.source}: {element}: {defect}; accepted: "
+                               f"{unit_text} has a physical combined inertia, which is "
+                               "what moves (strict=True refuses it)"), InertiaWarning)
 
 
 # How errors about bodies name them: a URDF reader says "link 'x', inertial inertia"
@@ -637,9 +635,9 @@ def check_inertia(inertia: np.ndarray, source: str, element: str, strict: bool =
                          f"exports ({tolerance}) but refused because strict=True (load with "
                          "strict=False to accept it with a warning, or fix the inertia)")
     if mode == "warn":
-        warnings.warn(one_line(f"{source}: {element}: {defect}; within what gagen accepts "
-                               f"from CAD exports ({tolerance}), loaded anyway (strict=True "
-                               "refuses it)"), InertiaWarning, stacklevel=2)
+        warn_user(one_line(f"{source}: {element}: {defect}; within what gagen accepts "
+                           f"from CAD exports ({tolerance}), loaded anyway (strict=True "
+                           "refuses it)"), InertiaWarning)
 
 
 def check_tensor(inertia: np.ndarray, source: str, element: str) -> None:

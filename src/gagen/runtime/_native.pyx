@@ -18,12 +18,13 @@ from cpython.dict cimport PyDict_GetItem
 from cpython.exc cimport PyErr_CheckSignals
 from cpython.object cimport PyObject
 from cpython.pycapsule cimport PyCapsule_GetPointer
+from libc.float cimport DBL_MAX, DBL_MIN
 from libc.math cimport NAN, isfinite
 from libc.stdint cimport int32_t, int64_t
 from libc.stdlib cimport free, malloc
 
 from gagen.errors import NonFiniteStateError, SingularMassMatrixError
-from gagen.runtime.inputs import as_float_array
+from gagen.runtime.inputs import as_float_array, as_states, nonfinite_cause, quaternion_error
 from gagen.runtime.taskspace import KINDS, REFERENCES, kind_code, reference_code
 
 cnp.import_array()
@@ -89,6 +90,17 @@ cdef extern from "gagen_api.h" nogil:
         int (*control_torques)(const gagen_control *c, const double *p, long m,
                                const double *t, const double *y,
                                double *tau) noexcept nogil
+        void (*center_of_mass)(const double *q, const double *p, double *com) noexcept nogil
+        void (*com_velocity)(const double *q, const double *qd, const double *p,
+                             double *vcom) noexcept nogil
+        void (*com_jacobian)(const double *q, const double *p, double *J) noexcept nogil
+        void (*centroidal_map)(const double *q, const double *p, double *Ag) noexcept nogil
+        void (*centroidal_momentum)(const double *q, const double *qd, const double *p,
+                                    double *hg) noexcept nogil
+        void (*centroidal_map_time_variation)(const double *q, const double *qd,
+                                              const double *p, double *dAg) noexcept nogil
+        void (*centroidal_bias)(const double *q, const double *qd, const double *p,
+                                double *b) noexcept nogil
         int (*frame_jacobians)(const double *q, const double *p, int count, const int *frames,
                                int reference, double *J) noexcept nogil
         int (*frame_acceleration)(const double *q, const double *qd, const double *qdd,
@@ -223,6 +235,25 @@ cdef inline bint _all_finite(const double *x, Py_ssize_t n) noexcept:
     return True
 
 
+cdef int _bad_quaternion(const double *q, Py_ssize_t rows, Py_ssize_t step,
+                         const int *offsets, int count, Py_ssize_t *row) noexcept nogil:
+    """The first quaternion (its index in offsets; its row in *row) whose squared norm is
+    not a finite normal double (NaN or inf entries included), or -1
+    (gagen.runtime.inputs.check_quaternions says why)."""
+    cdef Py_ssize_t i
+    cdef int k
+    cdef const double *x
+    cdef double n2
+    for i in range(rows):
+        for k in range(count):
+            x = q + i * step + offsets[k]
+            n2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3]
+            if not (n2 >= DBL_MIN and n2 <= DBL_MAX):
+                row[0] = i
+                return k
+    return -1
+
+
 cdef inline double *_data(cnp.ndarray a) noexcept:
     return <double *>cnp.PyArray_DATA(a)
 
@@ -262,12 +293,12 @@ cdef inline cnp.ndarray _matrices(Py_ssize_t rows, Py_ssize_t r, Py_ssize_t c):
     return cnp.PyArray_EMPTY(3, dims, cnp.NPY_DOUBLE, 0)
 
 
-def _raise_not_positive_definite(str ident, int err_nonfinite, row, status=1):
+def _raise_not_positive_definite(str ident, int err_nonfinite, row, status=1, q=None):
     where = "" if row < 0 else f" (stacked input, row {row})"
     if status == err_nonfinite:
         raise NonFiniteStateError(
             f"the mass matrix of model '{ident}' is NaN or inf at this state{where}: "
-            "q holds NaN or inf")
+            + nonfinite_cause(q))
     raise SingularMassMatrixError(
         f"the mass matrix of model '{ident}' is singular or not positive definite at this "
         f"state{where}; check the state for NaN or inf and the parameters for zero or "
@@ -284,6 +315,9 @@ cdef class _Evaluator:
     cdef readonly str ident
     cdef readonly object parameter_vector
     cdef object _capsule  # keeps the module's table (and the module) alive
+    cdef int *_quaternions  # where each floating joint's quaternion starts in q
+    cdef int _nquaternions
+    cdef readonly tuple quaternions  # (first entry in q, description) of each
 
     cdef void _adopt(self, object capsule, const char *ident, int np_, int err_nonfinite,
                      const double *defaults):
@@ -292,6 +326,38 @@ cdef class _Evaluator:
         self.np_ = np_
         self.err_nonfinite = err_nonfinite
         self._defaults = defaults
+
+    cdef int _set_quaternions(self, object quaternions, int nq) except -1:
+        """The quaternions that q's checks look at (ModelInfo.quaternions())."""
+        self.quaternions = tuple((int(offset), str(label)) for offset, label in quaternions)
+        if any(not 0 <= offset <= nq - 4 for offset, _ in self.quaternions):
+            raise ValueError(f"a quaternion must lie within q's {nq} entries")
+        self._nquaternions = len(self.quaternions)
+        if self._nquaternions:
+            self._quaternions = <int *>malloc(self._nquaternions * sizeof(int))
+            if self._quaternions == NULL:
+                raise MemoryError()
+            for k, (offset, _) in enumerate(self.quaternions):
+                self._quaternions[k] = offset
+        return 0
+
+    def __dealloc__(self):
+        free(self._quaternions)
+
+    cdef int _check_quaternions(self, cnp.ndarray q, Py_ssize_t rows, str name) except -1:
+        """ValueError for a quaternion of q that cannot be normalised (one state, or
+        `rows` stacked ones)."""
+        if self._nquaternions == 0:
+            return 0
+        cdef Py_ssize_t row = 0
+        cdef int k = _bad_quaternion(_data(q), rows if rows >= 0 else 1, _step(q),
+                                     self._quaternions, self._nquaternions, &row)
+        if k >= 0:
+            offset, label = self.quaternions[k]
+            values = q[row] if rows >= 0 else q
+            raise quaternion_error(name, label, row if rows >= 0 else -1,
+                                   values[offset: offset + 4])
+        return 0
 
     cdef cnp.ndarray _parameters(self, object p):
         if type(p) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>p) == cnp.NPY_DOUBLE \
@@ -310,8 +376,10 @@ cdef class _Evaluator:
         keep.append(pa)
         return <const double *>cnp.PyArray_DATA(pa)
 
-    cdef _failed(self, Py_ssize_t row, int status):
-        _raise_not_positive_definite(self.ident, self.err_nonfinite, row, status)
+    cdef _failed(self, Py_ssize_t row, int status, cnp.ndarray q):
+        """Raise for a kernel's failure at one state (row -1) or a stacked one's row."""
+        _raise_not_positive_definite(self.ident, self.err_nonfinite, row, status,
+                                     q if row < 0 else q[row])
 
 
 # --- the model's kernels ------------------------------------------------------------------
@@ -346,6 +414,26 @@ cdef inline int _call(const gagen_model_api *api, Kernel kernel, const double *a
     return 0
 
 
+cdef inline void _call_centroidal(const gagen_model_api *api, int which, const double *q,
+                                  const double *qd, const double *p,
+                                  double *out) noexcept nogil:
+    """One centroidal kernel (CompiledModel.centroidal's numbering) at one state."""
+    if which == 0:
+        api.center_of_mass(q, p, out)
+    elif which == 1:
+        api.com_velocity(q, qd, p, out)
+    elif which == 2:
+        api.com_jacobian(q, p, out)
+    elif which == 3:
+        api.centroidal_map(q, p, out)
+    elif which == 4:
+        api.centroidal_momentum(q, qd, p, out)
+    elif which == 5:
+        api.centroidal_map_time_variation(q, qd, p, out)
+    else:
+        api.centroidal_bias(q, qd, p, out)
+
+
 cdef class CompiledModel(_Evaluator):
     """The compiled kernels of a model's module, from its capsule `API`;
     `parameter_vector` turns the p= forms other than a float64 array into one,
@@ -356,11 +444,12 @@ cdef class CompiledModel(_Evaluator):
     cdef dict _frame_numbers  # frame name -> number
     cdef object _frame_index  # (frame) -> number, or the error that names the choices
 
-    def __init__(self, capsule, parameter_vector, external_forces=None, frame_numbers=None,
-                 frame_index=None):
+    def __init__(self, capsule, parameter_vector, external_forces=None, quaternions=(),
+                 frame_numbers=None, frame_index=None):
         self.api = <const gagen_model_api *>_table(capsule, MODEL_CAPSULE)
         self._adopt(capsule, self.api.ident, self.api.np, self.api.err_nonfinite,
                     self.api.parameter_defaults)
+        self._set_quaternions(quaternions, self.api.nq)
         self.parameter_vector = parameter_vector
         self.external_forces = external_forces
         self._frame_numbers = dict(frame_numbers or {})
@@ -380,12 +469,13 @@ cdef class CompiledModel(_Evaluator):
             rows = _rows(b, rows, ny)
         if nz is not None:
             rows = _rows(c, rows, nz)
+        self._check_quaternions(a, rows, nx)
         cdef cnp.ndarray out = _vectors(rows, nout)
         cdef int status = 0
         if rows < 0:
             status = _call(api, kernel, _data(a), _data(b), _data(c), pp, _data(out))
             if status:
-                self._failed(-1, status)
+                self._failed(-1, status, a)
             return out
         cdef double *pa_ = _data(a)
         cdef double *pb = _data(b)
@@ -415,7 +505,7 @@ cdef class CompiledModel(_Evaluator):
                 gagen_stream_fence()
         free(scratch)
         if failed >= 0:
-            self._failed(failed, status)
+            self._failed(failed, status, a)
         return out
 
     def mass_matrix(self, q, p=None):
@@ -433,7 +523,8 @@ cdef class CompiledModel(_Evaluator):
     def forward_dynamics(self, q, qd, tau, p=None, fext=None):
         """qdd = M(q)^-1 F(q, qd, tau [+ J^T w of the wrenches fext])."""
         if fext is not None:
-            tau = as_float_array(tau, "tau") + self.external_forces(q, fext, p)
+            (q, tau), _ = as_states((self.api.nq, self.api.nv), q, tau, names=("q", "tau"))
+            tau = tau + self.external_forces(q, fext, p)
         return self._run(FORWARD_DYNAMICS, self.api.nv, q, qd, tau, p, "q", "qd", "tau")
 
     def inverse_dynamics(self, q, qd, qdd, p=None, fext=None):
@@ -477,6 +568,7 @@ cdef class CompiledModel(_Evaluator):
         cdef Py_ssize_t rows = _rows(a, -1, "q")
         if which == 2:
             rows = _rows(b, rows, "qd")
+        self._check_quaternions(a, rows, "q")
         cdef int nout = 12 if which == 0 else (6 * api.nv if which == 1 else 6)
         # allocated in its final shape (a reshape or a row view afterwards costs more than
         # the kernel on a small robot)
@@ -560,6 +652,7 @@ cdef class CompiledModel(_Evaluator):
         cdef Py_ssize_t rows = _rows(b, _rows(a, -1, "q"), "qd")
         if which == 0:
             rows = _rows(c, rows, "qdd")
+        self._check_quaternions(a, rows, "q")
         cdef int nout = 6 * api.nv if which == 2 else 6
         cdef cnp.ndarray out = _matrices(rows, 6, api.nv) if which == 2 else _vectors(rows, 6)
         cdef double *pa_ = _data(a)
@@ -588,6 +681,7 @@ cdef class CompiledModel(_Evaluator):
         cdef list keep = []
         cdef const double *pp = self._parameter_data(p, keep)
         cdef Py_ssize_t rows = _rows(a, -1, "q")
+        self._check_quaternions(a, rows, "q")
         cdef object shape = (k, 6, api.nv)
         if rows >= 0:
             shape = (rows,) + shape
@@ -619,6 +713,7 @@ cdef class CompiledModel(_Evaluator):
         cdef list keep = []
         cdef const double *pp = self._parameter_data(p, keep)
         cdef Py_ssize_t rows = _rows(a, -1, "q"), m = dims * k
+        self._check_quaternions(a, rows, "q")
         cdef cnp.ndarray out = _matrices(rows, m, m)
         cdef const int *pf = <const int *>cnp.PyArray_DATA(fr)
         cdef double *pa_ = _data(a)
@@ -641,8 +736,65 @@ cdef class CompiledModel(_Evaluator):
                     status = code
         free(work)
         if status != 0 and (status == self.err_nonfinite or status == 1):
-            self._failed(failed if rows >= 0 else -1, status)
+            self._failed(failed if rows >= 0 else -1, status, a)
         return out, status, (failed if rows >= 0 else -1)
+
+    cdef object _centroidal(self, int which, object q, object qd, object p):
+        """A centroidal kernel (_call_centroidal's numbering) at one state or stacked
+        states, into a fresh array of its final shape."""
+        cdef const gagen_model_api *api = self.api
+        cdef bint rates = qd is not None
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef cnp.ndarray b = _state(qd, "qd", api.nv) if rates else a
+        cdef list keep = []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(a, -1, "q")
+        if rates:
+            rows = _rows(b, rows, "qd")
+        cdef int height = 3 if which <= 2 else 6
+        cdef bint matrix = which == 2 or which == 3 or which == 5
+        cdef int nout = height * api.nv if matrix else height
+        cdef cnp.ndarray out = _matrices(rows, height, api.nv) if matrix \
+            else _vectors(rows, height)
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *po = _data(out)
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), i
+        if rows < 0:  # one state: releasing the GIL would cost more than the kernel saves
+            _call_centroidal(api, which, pa_, pb, pp, po)
+            return out
+        with nogil:
+            for i in range(rows):
+                _call_centroidal(api, which, pa_ + i * sa, pb + i * sb, pp, po + i * nout)
+        return out
+
+    def center_of_mass(self, q, p=None):
+        """The centre of mass in the world, (3,) or (N, 3)."""
+        return self._centroidal(0, q, None, p)
+
+    def com_velocity(self, q, qd, p=None):
+        """The centre of mass's velocity, (3,) or (N, 3)."""
+        return self._centroidal(1, q, qd, p)
+
+    def com_jacobian(self, q, p=None):
+        """J_com, (3, nv) or (N, 3, nv): com_velocity = J_com qd."""
+        return self._centroidal(2, q, None, p)
+
+    def centroidal_map(self, q, p=None):
+        """A_g, (6, nv) or (N, 6, nv): h_g = A_g qd."""
+        return self._centroidal(3, q, None, p)
+
+    def centroidal_momentum(self, q, qd, p=None):
+        """h_g, (6,) or (N, 6): linear momentum, angular momentum about the centre of mass."""
+        return self._centroidal(4, q, qd, p)
+
+    def centroidal_map_time_variation(self, q, qd, p=None):
+        """d/dt A_g, (6, nv) or (N, 6, nv)."""
+        return self._centroidal(5, q, qd, p)
+
+    def centroidal_bias(self, q, qd, p=None):
+        """d/dt A_g qd, (6,) or (N, 6): d/dt h_g = A_g qdd + centroidal_bias."""
+        return self._centroidal(6, q, qd, p)
 
     def gravity(self, q, p=None):
         """The gravity torques g(q) = inverse_dynamics(q, 0, 0)."""
@@ -1124,10 +1276,11 @@ cdef class CompiledDerivatives(_Evaluator):
 
     cdef const gagen_derivatives_api *api
 
-    def __init__(self, capsule, parameter_vector):
+    def __init__(self, capsule, parameter_vector, quaternions=()):
         self.api = <const gagen_derivatives_api *>_table(capsule, DERIVATIVES_CAPSULE)
         self._adopt(capsule, self.api.ident, self.api.np, self.api.err_nonfinite,
                     self.api.parameter_defaults)
+        self._set_quaternions(quaternions, self.api.nq)
         self.parameter_vector = parameter_vector
 
     cdef tuple _run(self, Derivative kernel, int count, Py_ssize_t r0, Py_ssize_t c0,
@@ -1146,6 +1299,7 @@ cdef class CompiledDerivatives(_Evaluator):
             rows = _rows(b, rows, ny)
         if nz is not None:
             rows = _rows(c, rows, nz)
+        self._check_quaternions(a, rows, nx)
         cdef cnp.ndarray m0 = _matrices(rows, r0, c0)
         cdef cnp.ndarray m1 = _matrices(rows, r1, c1) if count > 1 else m0
         cdef cnp.ndarray m2 = _matrices(rows, r1, c1) if count > 2 else m0
@@ -1173,7 +1327,7 @@ cdef class CompiledDerivatives(_Evaluator):
                         failed = i
                         status = code
         if status:
-            self._failed(failed, status)
+            self._failed(failed, status, a)
         if count == 1:
             return (m0,)
         if count == 2:

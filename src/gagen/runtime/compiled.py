@@ -13,6 +13,10 @@ from .taskspace import singular_task, task_dims, task_frames
 
 KERNEL_METHODS = ("mass_matrix", "forcing", "forward_dynamics", "inverse_dynamics",
                   "gravity", "energy", "regressor", "regressor_parameters")
+# the centre of mass and centroidal dynamics (centroidal.c), bound like KERNEL_METHODS
+CENTROIDAL_METHODS = ("center_of_mass", "com_velocity", "com_jacobian", "centroidal_map",
+                      "centroidal_momentum", "centroidal_map_time_variation",
+                      "centroidal_bias")
 # the frames' methods, by name (gagen.runtime.taskspace has their conventions)
 FRAME_METHODS = ("frame_jacobian", "frame_velocity", "frame_acceleration",
                  "frame_bias_acceleration", "frame_jacobian_time_variation")
@@ -49,9 +53,10 @@ class CompiledDynamics(Dynamics):
         self._derivatives = derivatives
         self.derivative_module = None
         self.kernels = native().CompiledModel(module.API, self.parameter_vector,
-                                              self.external_forces, self.info.frame_indices,
+                                              self.external_forces, self.info.quaternions(),
+                                              self.info.frame_indices,
                                               partial(frame_index, self.info))
-        for name in KERNEL_METHODS + FRAME_METHODS:
+        for name in KERNEL_METHODS + CENTROIDAL_METHODS + FRAME_METHODS:
             setattr(self, name, getattr(self.kernels, name))
         self._frame_numbers = self.info.frame_indices
 
@@ -112,7 +117,8 @@ class CompiledDynamics(Dynamics):
                 f"the derivative module {module.__name__} was not built from the equations of "
                 f"{self.module.__name__} (its key {module.EQUATIONS_KEY[:12]}, expected "
                 f"{self.module.KEY[:12]})")
-        kernels = native().CompiledDerivatives(module.API, self.parameter_vector)
+        kernels = native().CompiledDerivatives(module.API, self.parameter_vector,
+                                               self.info.quaternions())
         for name in DERIVATIVE_METHODS:
             setattr(self, name, getattr(kernels, name))
         self.derivative_module = module

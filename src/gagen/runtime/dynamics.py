@@ -10,7 +10,7 @@ import numpy as np
 from ..errors import SingularMassMatrixError  # noqa: F401 (re-exported)
 from ..manifest import ModelInfo
 from .frames import frame_index, frame_indices
-from .inputs import as_states, parameter_array
+from .inputs import as_states, check_quaternions, parameter_array
 
 
 class Dynamics:
@@ -39,6 +39,16 @@ class Dynamics:
                 else (self._model_ref, False)
             model = self.__dict__["_model"] = resolve_model(ref, floating_base=floating_base)
         return model
+
+    @property
+    def source(self) -> str:
+        """Where the model was read from: its description's path as given to `gagen.load`
+        (for a given Model, the path it was read from), or a built-in's name. The viewer
+        finds the description's meshes from it."""
+        ref = self._model_ref[0] if isinstance(self._model_ref, tuple) else self._model_ref
+        if ref is None:
+            return self.info.source
+        return str(getattr(ref, "source", ref))
 
     @property
     def coordinates(self) -> list[str]:
@@ -105,17 +115,28 @@ class Dynamics:
     def integrate(self, q, v, dt=1.0) -> np.ndarray:
         """q ⊕ v·dt, as Pinocchio's `integrate(model, q, v * dt)`: a floating joint moves
         along the twist v (its origin's velocity and its angular velocity, in its body's
-        frame) held for dt, every other coordinate by v·dt. Shapes (nq,), (nv,) or stacked."""
-        from .manifold import integrate
+        frame) held for dt, every other coordinate by v·dt. Shapes (nq,), (nv,) or stacked;
+        dt a number."""
+        from .manifold import checked_step, integrate
 
-        return integrate(self.info, q, v, dt)
+        (q, v), _ = as_states(self._sizes[:2], q, v, names=("q", "v"))
+        check_quaternions(q, self._quaternions)
+        return integrate(self.info, q, checked_step(self.info, v, dt), 1.0)
 
     def difference(self, q0, q1) -> np.ndarray:
         """The velocity v, shape (nv,), with `integrate(q0, v) == q1` (Pinocchio's
         `difference`); stacked inputs give stacked outputs."""
         from .manifold import difference
 
+        (q0, q1), _ = as_states((self.nq, self.nq), q0, q1, names=("q0", "q1"))
+        check_quaternions(q0, self._quaternions, "q0")
+        check_quaternions(q1, self._quaternions, "q1")
         return difference(self.info, q0, q1)
+
+    @cached_property
+    def _quaternions(self) -> tuple[tuple[int, str], ...]:
+        """(first entry in q, description) of each floating joint's quaternion."""
+        return self.info.quaternions()
 
     def neutral(self) -> np.ndarray:
         """The configuration with every coordinate 0 and every quaternion the identity."""
@@ -252,6 +273,75 @@ class Dynamics:
         X, F, stacked = self._frame_data(q, p)
         wrenches = external_wrenches(self.info, fext, X.shape[0] if stacked else None)
         return generalized_forces(self.info, X, F, wrenches, self.nv)
+
+    # --- centre of mass and centroidal dynamics (gagen.runtime.centroidal) ------------------
+    # Pinocchio's conventions (centerOfMass, ccrba, dccrba): 6-vectors and the rows of 6 x nv
+    # matrices are linear then angular, in world axes, about the centre of mass. The compiled
+    # backend binds its C kernels (centroidal.c) in their place.
+
+    def center_of_mass(self, q, p=None) -> np.ndarray:
+        """The centre of mass in the world: (3,), or (N, 3) for stacked q. The robot's mass
+        is its moving bodies' (a body welded to the world is left out, as in Pinocchio)."""
+        from . import centroidal
+
+        X, pi = self._centroidal_data(q, None, p)
+        return centroidal.center_of_mass(self.info, X, pi)
+
+    def com_velocity(self, q, qd, p=None) -> np.ndarray:
+        """The centre of mass's velocity in the world, (3,) or (N, 3): com_jacobian(q) @ qd."""
+        from . import centroidal
+
+        X, pi, qd = self._centroidal_data(q, qd, p)
+        return centroidal.com_velocity(self.info, X, pi, qd)
+
+    def com_jacobian(self, q, p=None) -> np.ndarray:
+        """J_com, (3, nv) or (N, 3, nv): com_velocity = J_com qd; the first three rows of
+        centroidal_map over the total mass (Pinocchio's jacobianCenterOfMass)."""
+        from . import centroidal
+
+        X, pi = self._centroidal_data(q, None, p)
+        return centroidal.com_jacobian(self.info, X, pi, self.nv)
+
+    def centroidal_map(self, q, p=None) -> np.ndarray:
+        """A_g, the centroidal momentum matrix, (6, nv) or (N, 6, nv): h_g = A_g qd, at the
+        centre of mass, world axes, linear rows first (Pinocchio's computeCentroidalMap)."""
+        from . import centroidal
+
+        X, pi = self._centroidal_data(q, None, p)
+        return centroidal.centroidal_map(self.info, X, pi, self.nv)
+
+    def centroidal_momentum(self, q, qd, p=None) -> np.ndarray:
+        """h_g, (6,) or (N, 6): the robot's linear momentum, then its angular momentum about
+        the centre of mass, world axes (Pinocchio's computeCentroidalMomentum)."""
+        from . import centroidal
+
+        X, pi, qd = self._centroidal_data(q, qd, p)
+        return centroidal.centroidal_momentum(self.info, X, pi, qd)
+
+    def centroidal_map_time_variation(self, q, qd, p=None) -> np.ndarray:
+        """d/dt A_g, (6, nv) or (N, 6, nv), along the velocity qd (Pinocchio's
+        computeCentroidalMapTimeVariation and dccrba's dAg)."""
+        from . import centroidal
+
+        X, pi, qd = self._centroidal_data(q, qd, p)
+        return centroidal.centroidal_map_time_variation(self.info, X, pi, qd, self.nv)
+
+    def centroidal_bias(self, q, qd, p=None) -> np.ndarray:
+        """d/dt A_g qd, (6,) or (N, 6): the rate of h_g at qdd = 0, so that d/dt h_g =
+        A_g qdd + centroidal_bias; by Newton and Euler, d/dt h_g is also m g plus the
+        external wrenches about the centre of mass (Pinocchio's dccrba's dAg @ v)."""
+        from . import centroidal
+
+        X, pi, qd = self._centroidal_data(q, qd, p)
+        return centroidal.centroidal_bias(self.info, X, pi, qd)
+
+    def _centroidal_data(self, q, qd, p):
+        """The placements and the regressor's parameters at q (and qd checked with it)."""
+        if qd is None:
+            (q,), _ = as_states(self.nq, q, names=("q",))
+            return self._placements(q, p), self.regressor_parameters(p)
+        (q, qd), _ = as_states(self._sizes[:2], q, qd, names=("q", "qd"))
+        return self._placements(q, p), self.regressor_parameters(p), qd
 
     # --- the dynamics (each backend implements these) --------------------------------------
 

@@ -14,7 +14,7 @@
 
 #include "integrator.h"
 
-#define GAGEN_API_VERSION 2
+#define GAGEN_API_VERSION 3
 
 typedef struct {
     int version;                     /* GAGEN_API_VERSION */
@@ -48,6 +48,16 @@ typedef struct {
                     const double *t_eval, int n_eval, double *y_out, gagen_ode_stats *stats);
     int (*control_torques)(const gagen_control *c, const double *p, long m, const double *t,
                            const double *y, double *tau);
+    /* centre of mass and centroidal dynamics (centroidal.c) */
+    void (*center_of_mass)(const double *q, const double *p, double *com);
+    void (*com_velocity)(const double *q, const double *qd, const double *p, double *vcom);
+    void (*com_jacobian)(const double *q, const double *p, double *J);
+    void (*centroidal_map)(const double *q, const double *p, double *Ag);
+    void (*centroidal_momentum)(const double *q, const double *qd, const double *p,
+                                double *hg);
+    void (*centroidal_map_time_variation)(const double *q, const double *qd, const double *p,
+                                          double *dAg);
+    void (*centroidal_bias)(const double *q, const double *qd, const double *p, double *b);
     /* task space (frames.c) */
     int (*frame_jacobians)(const double *q, const double *p, int count, const int *frames,
                            int reference, double *J);
