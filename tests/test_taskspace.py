@@ -406,6 +406,27 @@ def test_bad_arguments_are_refused_with_one_line(anymal):
         anymal.frame_jacobian_time_variation(v, v, "LF_FOOT")
 
 
+@pytest.mark.parametrize("backend", ["lambdify", "compiled"])
+def test_a_quaternion_that_cannot_be_normalised_is_refused(backend, cache_dir):
+    """As every method taking q (test_hostile_input_round3): one line naming the joint."""
+    dyn = load_tree("floating2", backend, cache_dir)
+    v, frame = np.zeros(dyn.nv), dyn.frames[-1]
+    for quaternion, says in (([0.0] * 4, "is zero"), ([1e200, 0, 0, 1e200], "overflows")):
+        q = dyn.neutral()
+        q[3:7] = quaternion
+        calls = ((dyn.frame_jacobian, (q, [frame], "world")),
+                 (dyn.frame_acceleration, (q, v, v, frame)),
+                 (dyn.frame_bias_acceleration, (q, v, frame, "local")),
+                 (dyn.frame_jacobian_time_variation, (q, v, frame)),
+                 (dyn.delassus, (q, frame)),
+                 (dyn.operational_space_inertia, (np.stack([dyn.neutral(), q]), frame)))
+        for call, args in calls:
+            with pytest.raises(ValueError, match=f"quaternion of floating joint 'base'.*{says}"
+                               ) as error:
+                call(*args)
+            assert "\n" not in str(error.value)
+
+
 def test_the_c_api_has_the_task_space_functions(anymal):
     """<model>_frame_acceleration, _frame_jacobian_time_variation and
     _operational_space_inertia, called as C functions."""
