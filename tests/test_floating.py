@@ -167,7 +167,7 @@ def _ours_q(ref: Reference, q_pin) -> np.ndarray:
 # --------------------------------------------------------------------- the real robots
 
 @pytest.fixture(scope="module")
-def anymal(cache_dir):  # the session's cache: test_centroidal loads the same module
+def anymal(cache_dir):  # the session's cache: test_centroidal and test_taskspace load it
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", gagen.InertiaWarning)
         return gagen.load(URDF / "anymal_c.urdf", floating_base=True, cache_dir=cache_dir)

@@ -61,6 +61,11 @@ static const gagen_model_api api = {
     .centroidal_momentum = rrr_centroidal_momentum,
     .centroidal_map_time_variation = rrr_centroidal_map_time_variation,
     .centroidal_bias = rrr_centroidal_bias,
+    .frame_jacobians = rrr_frame_jacobians,
+    .frame_acceleration = rrr_frame_acceleration,
+    .frame_jacobian_time_variation = rrr_frame_jacobian_time_variation,
+    .delassus = rrr_delassus,
+    .operational_space_inertia = rrr_operational_space_inertia,
 };
 
 static struct PyModuleDef module_definition = {
@@ -80,7 +85,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "f9b086fd875b42b948c832cdc858499deba9e441398943eff83fd6bdee7f6960") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "8aed104a3cd7bcbc86f9ec1e706c48b6e90f361dcb53bc8268b8247099b8383a") < 0) {
         Py_DECREF(module);
         return NULL;
     }

@@ -3,6 +3,7 @@
 - `ModelError`: a description that cannot be used; names the file, the element, the reason.
 - `BuildError` (and `CompilerNotFoundError`): generated code that did not compile.
 - `SingularMassMatrixError`: M(q) is singular or not positive definite at a state.
+- `SingularTaskError`: a task's rows are dependent: no operational-space inertia there.
 - `InertiaWarning`: an inertia slightly off physical (CAD round-off), accepted unless strict.
 """
 
@@ -62,6 +63,11 @@ class CompilerNotFoundError(BuildError):
 
 class SingularMassMatrixError(np.linalg.LinAlgError):
     """The mass matrix is singular or not positive definite at the given state."""
+
+
+class SingularTaskError(np.linalg.LinAlgError):
+    """The rows of a task (frames' stacked Jacobian rows) are linearly dependent at the given
+    state, so its operational-space inertia (J M⁻¹ Jᵀ)⁻¹ does not exist."""
 
 
 class InertiaWarning(UserWarning):

@@ -2,7 +2,8 @@
 
 Modules: `timing` (the interleaved runner every section uses), `peers` (Pinocchio, PyDy
 and plain SymPy versions of the same robot), `percall`, `batched`, `simulation`,
-`scaling`, `coldbuild`, `pinocchio_cpp`, `floating`, `centroidal`, `derivatives`, `report` (report.md and PNG plots) and `run` (the whole suite). Pinocchio and
+`scaling`, `coldbuild`, `pinocchio_cpp`, `floating`, `centroidal`, `taskspace`,
+`derivatives`, `report` (report.md and PNG plots) and `run` (the whole suite). Pinocchio and
 PyDy are optional (`pip install gagen[bench]`); without them their rows are skipped.
 
 This module holds only the command's description (gagen.app.cli parses the command line);
@@ -47,6 +48,10 @@ Default (a few minutes on 2 cores):
   centroidal        ANYmal C's centre of mass, A_g, its bias d/dt A_g qd and d/dt A_g
                     against Pinocchio's centerOfMass, computeCentroidalMap, ccrba, dccrba
                     and computeCentroidalMapTimeVariation
+  taskspace         a frame's J̇ q̇, J̇ and operational-space inertia on the Panda's tool and
+                    an ANYmal C foot against Pinocchio (forwardKinematics +
+                    getFrameClassicalAcceleration, computeJointJacobiansTimeVariation +
+                    getFrameJacobianTimeVariation, computeMinverse + Jacobian products)
 --only SECTION ... runs the named sections alone.
 Candidates are timed interleaved (round-robin over the repeats); reported are medians,
 interquartile ranges and ratios to a baseline."""

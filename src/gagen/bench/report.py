@@ -266,6 +266,17 @@ def markdown(results: dict, images: dict | None = None) -> str:
                   "`numpy.linalg.lstsq` (minimum-norm, no base parameters), "
                   f"{rg.get('identify_repeats', '?')} interleaved repeats."), "",
                   identification_table(rg["identify"]), ""]
+    ts = results.get("taskspace", {})
+    lines += _section(
+        results, "taskspace", "Task space per call: the Panda's tool and an ANYmal C foot",
+        "`dyn.frame_bias_acceleration` (J̇ q̇, classical, LOCAL_WORLD_ALIGNED), "
+        "`frame_jacobian_time_variation` (J̇) and `operational_space_inertia` (Λ: the "
+        "tool's 6 rows, the foot's 3) against Pinocchio on its own URDF parse, as a user "
+        "calls it from Python: `forwardKinematics(q, v, 0)` + "
+        "`getFrameClassicalAcceleration`, `computeJointJacobiansTimeVariation` + "
+        "`getFrameJacobianTimeVariation`, `computeMinverse` + `computeFrameJacobian` + "
+        f"NumPy; {ts.get('repeats', '?')} interleaved repeats, ratios to gagen "
+        "(> 1: slower than gagen).", percall_table, None, images)
     sc = results.get("scaling", {})
     lines += _section(
         results, "scaling", "Scaling: build and call time against the robot's size",

@@ -27,7 +27,8 @@ from . import peers
 from .common import PANDA, Progress, compiled, find_urdf_dir, machine_info, optional
 
 SECTIONS = ("percall", "batched", "simulation", "throughput", "scaling", "derivatives",
-            "panda", "floating", "regressor", "centroidal")
+            "panda", "floating", "regressor", "centroidal",
+            "taskspace")
 
 
 @dataclass
@@ -275,6 +276,22 @@ class Bench:
             self._note("centroidal", note)
         return {"rows": rows, "repeats": s.panda_repeats}
 
+    def taskspace(self) -> dict:
+        from .common import PANDA
+        from .taskspace import goal_notes, taskspace_rows
+
+        s = self.settings
+        folder = find_urdf_dir(self.urdf_dir, needed=PANDA)
+        if folder is None:
+            note = "the shared URDFs were not found: the task-space section is skipped"
+            self.results["notes"].append(note)
+            return {"rows": [], "skipped": note}
+        rows = taskspace_rows(folder, self.scratch / "taskspace", s.panda_repeats,
+                              s.target_s, progress=lambda text: self.progress("taskspace", text))
+        for note in goal_notes(rows):
+            self._note("taskspace", note)
+        return {"rows": rows, "repeats": s.panda_repeats}
+
     def derivatives(self) -> dict:
         from ..model.resolve import resolve_model
         from .derivatives import build_rows, derivative_rows, goal_note
@@ -369,7 +386,8 @@ class Bench:
         titles = {"percall": "per call", "batched": "batched", "simulation": "simulation",
                   "throughput": "throughput", "scaling": "scaling",
                   "derivatives": "derivatives", "panda": "panda", "floating": "floating",
-                  "regressor": "regressor", "centroidal": "centroidal"}
+                  "regressor": "regressor", "centroidal": "centroidal",
+                  "taskspace": "task space"}
         try:
             if {"percall", "batched", "simulation", "throughput"} & set(self.settings.sections):
                 start = time.perf_counter()

@@ -20,7 +20,7 @@ from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE, precedence
 
 from .. import __version__
-from ..manifest import FRICTION_WIDTH, QUATERNION_RESTORING, ModelInfo
+from ..manifest import FRICTION_WIDTH, JOINT_KINDS, QUATERNION_RESTORING, ModelInfo
 from ..symbolic.centroidal import centroidal_program
 from ..symbolic.differentiate import needed_definitions
 from ..symbolic.frames import OFFSET_SIZE, TRANSFORM_SIZE, add_frame_kinematics
@@ -854,6 +854,7 @@ def generate(eqs: Equations, module_name: str, key: str,
         "frame_names": [c_identifier(name) for name, _, _ in info.frames],
         # the moving bodies for centroidal.c: (body, moving parent, kind, first coordinate)
         "centroidal": info.moving_tree,
+        "dof_parents": dof_parents(info.bodies, n),
         "ldlt": ldlt_plan(n, zero),
         "zero_fill": zero_fill,
         "blocks": blocks,
@@ -886,6 +887,22 @@ def generate(eqs: Equations, module_name: str, key: str,
         files[name] = f"/* {context['header']} (copied from gagen's templates) */\n" + text
     return GeneratedCode(files=files, ops_before=cse.ops_before, ops_after=cse.ops_after,
                          cse_seconds=cse.seconds, module_name=module_name, ident=ident)
+
+
+def dof_parents(bodies, n: int) -> list[int]:
+    """Per velocity coordinate, the one before it on its path to the world (-1: none), from
+    the tree (parent, joint kind, first coordinate) per body: Featherstone's λ, the sparsity
+    of M that the task-space factorisation M = Lᵀ D L keeps."""
+    sizes = {JOINT_KINDS["fixed"]: 0, JOINT_KINDS["floating"]: 6}
+    last: list[int] = []  # per body, the last coordinate on its path (-1: none)
+    out = [-1] * n
+    for parent, kind, column in bodies:
+        before = last[parent] if parent >= 0 else -1
+        size = sizes.get(kind, 1)
+        for k in range(size):
+            out[column + k] = before if k == 0 else column + k - 1
+        last.append(column + size - 1 if size else before)
+    return out
 
 
 def zero_fills_mass_matrix(n: int, zeros: int) -> bool:

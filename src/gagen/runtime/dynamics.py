@@ -9,6 +9,7 @@ import numpy as np
 
 from ..errors import SingularMassMatrixError  # noqa: F401 (re-exported)
 from ..manifest import ModelInfo
+from .frames import frame_index, frame_indices
 from .inputs import as_states, check_quaternions, parameter_array
 
 
@@ -155,26 +156,40 @@ class Dynamics:
         """(R, p): the frame's orientation (world components of its axes, (3, 3)) and its
         origin in the world (3,); stacked q gives (N, 3, 3) and (N, 3). `frame` is a name of
         `frames` or an index into it."""
-        from .frames import frame_index, pose
+        from .frames import pose
 
         X, F, _ = self._frame_data(q, p)
         return pose(self.info, X, F, frame_index(self.info, frame))
 
-    def frame_jacobian(self, q, frame, p=None) -> np.ndarray:
-        """The frame's Jacobian, (6, nv) or (N, 6, nv), in Pinocchio's LOCAL_WORLD_ALIGNED
-        convention: rows 0-2 map qd to the velocity of the frame's origin, rows 3-5 to its
-        angular velocity, both in world axes."""
-        from .frames import frame_index, jacobian
+    def frame_jacobian(self, q, frame, reference="local_world_aligned", p=None) -> np.ndarray:
+        """The frame's Jacobian, (6, nv) or (N, 6, nv): rows 0-2 map qd to the linear
+        velocity, rows 3-5 to the angular velocity, in `reference` (Pinocchio's):
+        "local_world_aligned" (the velocity of the frame's origin, world axes), "local"
+        (the same in the frame's axes) or "world" (the velocity of the point of the frame's
+        body at the world's origin, world axes). A list of frames gives their Jacobians,
+        (k, 6, nv) or (N, k, 6, nv), their common ancestors placed once."""
+        from .taskspace import jacobian, reference_code
 
+        code = reference_code(reference)
         X, F, _ = self._frame_data(q, p)
-        return jacobian(self.info, X, F, frame_index(self.info, frame), self.nv)
+        if isinstance(frame, (list, tuple)):
+            indices = frame_indices(self.info, frame)
+            if not indices:
+                return np.zeros(X.shape[:-1] + (0, 6, self.nv))
+            return np.stack([jacobian(self.info, X, F, k, self.nv, code) for k in indices],
+                            axis=-3)
+        return jacobian(self.info, X, F, frame_index(self.info, frame), self.nv, code)
 
-    def frame_velocity(self, q, qd, frame, p=None) -> np.ndarray:
-        """The frame's velocity, (6,) or (N, 6): its origin's linear velocity, then its
-        angular velocity, in world axes (= frame_jacobian(q, frame) @ qd)."""
+    def frame_velocity(self, q, qd, frame, reference="local_world_aligned", p=None
+                       ) -> np.ndarray:
+        """The frame's velocity, (6,) or (N, 6): linear, then angular, in `reference` (as
+        frame_jacobian's; = frame_jacobian(q, frame, reference) @ qd)."""
+        from .taskspace import reference_code, velocity
+
+        code = reference_code(reference)
         (q, qd), _ = as_states(self._sizes[:2], q, qd, names=("q", "qd"))
-        J = self.frame_jacobian(q, frame, p)
-        return np.einsum("...ij,...j->...i", J, qd)
+        X, F, _ = self._frame_data(q, p)
+        return velocity(self.info, X, F, frame_index(self.info, frame), qd, code)
 
     def _frame_data(self, q, p):
         """(placements X, frame offsets F, stacked?) at q (see gagen.runtime.frames)."""
@@ -186,6 +201,67 @@ class Dynamics:
 
     def _frame_offsets(self, p) -> np.ndarray:
         raise NotImplementedError
+
+    # --- task space: accelerations, Jacobians' time variation, operational-space inertia
+    # (gagen.runtime.taskspace has the conventions and the recursion) -----------------------
+
+    def frame_acceleration(self, q, qd, qdd, frame, reference="local_world_aligned",
+                           kind="classical", p=None) -> np.ndarray:
+        """The frame's acceleration at (q, qd, qdd), (6,) or (N, 6), linear then angular, in
+        `reference` (as frame_jacobian's). kind="classical": the acceleration of the point
+        of the frame's body at the reference's origin (Pinocchio's
+        getFrameClassicalAcceleration; in "local_world_aligned", the frame origin's
+        acceleration in world axes); kind="spatial": the rate of the velocity's components
+        in that reference (getFrameAcceleration). Both are J qdd + frame_bias_acceleration."""
+        from .taskspace import acceleration, kind_code, reference_code
+
+        codes = reference_code(reference), kind_code(kind)
+        (q, qd, qdd), _ = as_states(self._sizes, q, qd, qdd, names=("q", "qd", "qdd"))
+        X, F, _ = self._frame_data(q, p)
+        return acceleration(self.info, X, F, frame_index(self.info, frame), qd, qdd, *codes)
+
+    def frame_bias_acceleration(self, q, qd, frame, reference="local_world_aligned",
+                                kind="classical", p=None) -> np.ndarray:
+        """frame_acceleration at qdd = 0, (6,) or (N, 6): the drift of a task, J̇ qd in the
+        convention of `kind` (with kind="classical", the frame origin's acceleration that
+        the velocities alone cause)."""
+        from .taskspace import acceleration, kind_code, reference_code
+
+        codes = reference_code(reference), kind_code(kind)
+        (q, qd), _ = as_states(self._sizes[:2], q, qd, names=("q", "qd"))
+        X, F, _ = self._frame_data(q, p)
+        return acceleration(self.info, X, F, frame_index(self.info, frame), qd, None, *codes)
+
+    def frame_jacobian_time_variation(self, q, qd, frame, reference="local_world_aligned",
+                                      p=None) -> np.ndarray:
+        """J̇ = dJ/dt of frame_jacobian(q, frame, reference) along qd, (6, nv) or (N, 6, nv):
+        Pinocchio's getFrameJacobianTimeVariation. J̇ qd is the spatial acceleration at
+        qdd = 0 in "local" and "world", the classical one in "local_world_aligned"."""
+        from .taskspace import jacobian_time_variation, reference_code
+
+        code = reference_code(reference)
+        (q, qd), _ = as_states(self._sizes[:2], q, qd, names=("q", "qd"))
+        X, F, _ = self._frame_data(q, p)
+        return jacobian_time_variation(self.info, X, F, frame_index(self.info, frame), qd,
+                                       self.nv, code)
+
+    def delassus(self, q, frames, dims=6, p=None) -> np.ndarray:
+        """G = J M⁻¹ Jᵀ, (m, m) or (N, m, m), of the frames' stacked LOCAL_WORLD_ALIGNED
+        Jacobian rows (each frame's 6, or with dims=3 its linear 3; m = dims · frames): the
+        Delassus matrix of contacts at those frames. From M's factors; M is never inverted.
+        `frames` is one frame or a list. Raises as forward_dynamics for a singular M."""
+        from .taskspace import delassus
+
+        return delassus(self, q, frames, dims, p)
+
+    def operational_space_inertia(self, q, frames, dims=6, p=None) -> np.ndarray:
+        """Λ = (J M⁻¹ Jᵀ)⁻¹, (m, m) or (N, m, m), for the rows of `delassus(q, frames, dims)`:
+        the inertia the frames' tasks see (F = Λ ẍ + ...). SingularTaskError, naming the
+        frames, when the rows are dependent (a singular configuration, a frame welded to the
+        world, more rows than coordinates, or rows constraining the same motion)."""
+        from .taskspace import operational_space_inertia
+
+        return operational_space_inertia(self, q, frames, dims, p)
 
     def external_forces(self, q, fext, p=None) -> np.ndarray:
         """The generalised force, (nv,) or (N, nv), of external wrenches fext = {frame: w},
