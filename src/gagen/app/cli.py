@@ -208,7 +208,9 @@ def _sweep_arguments(p: argparse.ArgumentParser) -> None:
                    help="draw NAME for every run, uniformly in [LO, HI] or within +-P %% of "
                    "its default; NAME is a parameter (patterns allowed: 'm[123]=20%%'), or "
                    "q0, qd0, kp, kd, target (degrees for angles), or one coordinate of them "
-                   "(q0.q2=-10:10); repeat for several")
+                   "(q0.q2=-10:10); repeat for several. A floating base: q0, qd0, ... vary "
+                   "the joints only; q0.base_x (m), qd0.base_wx (deg/s) name the base's "
+                   "entries; its quaternion cannot be varied (see above)")
     p.add_argument("--seed", type=_seed, default=0,
                    help="seed of the draws, a whole number >= 0 (default: 0)")
     p.add_argument("--duration", type=_positive, default=5.0, metavar="S",
@@ -459,7 +461,8 @@ def sweep_command(args: argparse.Namespace) -> int:
                     rtol=args.rtol, atol=args.atol, step=args.step, threads=args.threads,
                     scheduler=args.scheduler, out=args.out, cache_dir=args.cache_dir,
                     plot=not args.no_plot, html=args.html, html_runs=args.html_runs,
-                    html_mode=args.html_mode, package_dirs=args.package_path)
+                    html_mode=args.html_mode, package_dirs=args.package_path,
+                    strict=args.strict, floating_base=args.floating_base)
     print_sweep_report(run)
     return 0
 
@@ -557,11 +560,21 @@ SWEEP_DESCRIPTION = (
     "(gagen.simulate_batch) or on a Dask cluster (--scheduler). Example, the paper's Fig. 2\n"
     "under +-20 % mass uncertainty:\n\n"
     "  python -m gagen sweep rrr --runs 1000 --vary 'm[123]=20%' --out out/rrr/sweep.zarr\n\n"
-    "Writes FILE (.zarr: t, q, qd, tau (N, m, n), status, nfev, steps, rejected, q0, qd0,\n"
-    "p, kp, kd, target; streamed in blocks; read it with zarr.open_group or xarray.open_zarr.\n"
-    ".npz: the same arrays, read with np.load), FILE's stem + _fan.png (every run's q(t),\n"
-    "5-95 % band, median, nominal, deviation from the nominal), + _final.csv (statistics\n"
-    "of the final state, also printed) and, with --html, + .html (chosen runs in 3-D).")
+    "Writes FILE (.zarr: t, q (N, m, nq), qd, tau (N, m, nv), status, nfev, steps, rejected,\n"
+    "q0, qd0, p, kp, kd, target; streamed in blocks; read it with zarr.open_group or\n"
+    "xarray.open_zarr. .npz: the same arrays, read with np.load; the attributes name q's\n"
+    "entries (configuration) and qd's (coordinates)), FILE's stem + _fan.png (every run's\n"
+    "q(t), 5-95 % band, median, nominal, deviation from the nominal), + _final.csv\n"
+    "(statistics of the final state, also printed) and, with --html, + .html (chosen runs\n"
+    "in 3-D).\n\n"
+    "A floating base (--floating-base on a URDF, a model file's or MJCF's floating joint)\n"
+    "starts at the origin, unrotated, at rest. There q0, qd0, kp, kd, target without a\n"
+    "name vary the joints only. Name a base entry to vary it (names after its joint, here\n"
+    "base; a URDF's is root_joint): q0.base_x=-0.1:0.1 (m; q0 names dyn.configuration),\n"
+    "qd0.base_vz=0:1 (m/s), qd0.base_wx=-10:10 (deg/s; qd0 names dyn.coordinates). Its\n"
+    "quaternion (base_qx ... base_qw) cannot be drawn as angles and is refused, and so are\n"
+    "its kp, kd, target (it has no actuator). The statistics cover every entry of q (the\n"
+    "quaternion's unitless); the fan figure shows the joints only.")
 
 VIEW_DESCRIPTION = (
     "A live 3-D view of MODEL in the browser (viser; needs pip install gagen[viewer]): the\n"

@@ -11,6 +11,16 @@ independently), or q0, qd0, kp, kd, target for every coordinate (each drawn on i
 or one of them for one coordinate, q0.q2=-10:10. Angles are in degrees (q0, target) and
 degrees per second (qd0), as in `simulate`; prismatic coordinates in m and m/s.
 
+A floating base (nq = nv + 1 per floating joint) starts at the world's origin, unrotated,
+and at rest, as in `simulate`. There, q0, qd0, kp, kd, target without a name vary the
+joints only; q0.<entry> names an entry of q (`dyn.configuration`: a floating joint
+base's position base_x, _y, _z in m), qd0.<coordinate> one of qd (`dyn.coordinates`:
+base_vx, _vy, _vz in m/s, base_wx, _wy, _wz in degrees per second). A quaternion's entries (base_qx ... _qw)
+cannot be drawn as angles and are refused, and so are kp, kd, target of a floating joint
+(it has no actuator). q is stored as (runs, samples, nq), named by the file's
+`configuration` attribute, qd and tau as (runs, samples, nv), named by `coordinates`; the
+statistics cover every entry of q (a quaternion's unitless), the fan figure the joints.
+
 Results go to a Zarr store (`.zarr`, chunked along the runs, written block by block, so a
 sweep larger than memory streams to disk; `zarr.open_group(path)` or
 `xarray.open_zarr(path)` read it) or to NumPy's `.npz` (kept in memory, then written;
@@ -35,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from ..csvtext import text_cell
+from ..manifest import CONFIGURATION, VELOCITY, joint_names
 from ..sim.batch import BatchPlan, blocks, prepare_batch, run_batch
 from .runs import default_out_dir, load_dynamics
 
@@ -101,16 +112,17 @@ class SweepInputs:
     target: np.ndarray | None = None
 
 
-def draw_inputs(variations: list[Variation], runs: int, dyn, model, nominal, seed: int
+def draw_inputs(variations: list[Variation], runs: int, dyn, nominal, seed: int
                 ) -> SweepInputs:
     """Draw each varied quantity for every run (uniformly, independently; in the order of
-    `variations`, from one generator seeded with `seed`)."""
+    `variations`, from one generator seeded with `seed`). q0 has dyn.nq entries (the
+    rest: dyn.neutral()), the others dyn.nv."""
     rng = np.random.default_rng(seed)
     out = SweepInputs()
     defaults = dyn.parameters
     for v in variations:
         if v.name in STATE_TARGETS:
-            _draw_state(out, v, runs, dyn, model, nominal, rng)
+            _draw_state(out, v, runs, dyn, nominal, rng)
             continue
         names = [k for k in defaults if fnmatch.fnmatchcase(k, v.name)]
         if not names:
@@ -121,27 +133,83 @@ def draw_inputs(variations: list[Variation], runs: int, dyn, model, nominal, see
     return out
 
 
-def _draw_state(out: SweepInputs, v: Variation, runs: int, dyn, model, nominal, rng) -> None:
-    n = dyn.n
-    columns = list(range(n))
-    if v.coordinate is not None:
-        if v.coordinate not in dyn.coordinates:
-            raise KeyError(f"--vary {v.text!r}: no coordinate '{v.coordinate}' "
-                           f"(coordinates: {', '.join(dyn.coordinates)})")
-        columns = [dyn.coordinates.index(v.coordinate)]
-    base = {"q0": np.zeros(n), "qd0": np.zeros(n), "kp": nominal.c_spec(n)["kp"],
+@dataclass(frozen=True)
+class Entry:
+    """One entry of q (or of qd, kp, kd, target) as a sweep draws and reports it."""
+
+    name: str
+    unit: str  # "rad" (given and reported in degrees), "m", or "1" (a quaternion's entry)
+    joint: str
+    floating: bool  # an entry of a floating joint (which has no actuator)
+
+
+def state_entries(info, configuration: bool) -> list[Entry]:
+    """The entries of q (`configuration`, dyn.configuration's order) or of qd (dyn.coordinates'
+    order), each with its unit and joint."""
+    out = []
+    for joint in info.joints:
+        if joint.type == "floating":
+            units = ("m",) * 3 + (("1",) * 4 if configuration else ("rad",) * 3)
+            names = joint_names(joint, CONFIGURATION if configuration else VELOCITY)
+            out += [Entry(name, unit, joint.name, True) for name, unit in zip(names, units)]
+        else:
+            unit = "m" if joint.type == "prismatic" else "rad"
+            out.append(Entry(joint.name, unit, joint.name, False))
+    return out
+
+
+def _draw_state(out: SweepInputs, v: Variation, runs: int, dyn, nominal, rng) -> None:
+    entries = state_entries(dyn.info, configuration=v.name == "q0")
+    columns = _state_columns(v, entries, dyn.info.name)
+    if v.percent is not None and v.name in ANGLE_TARGETS:
+        raise ValueError(f"--vary {v.text!r}: give {v.name} as a range LO:HI (degrees)")
+    n = dyn.nv
+    base = {"q0": dyn.neutral(), "qd0": np.zeros(n), "kp": nominal.c_spec(n)["kp"],
             "kd": nominal.c_spec(n)["kd"], "target": nominal.c_spec(n)["target"]}[v.name]
     current = getattr(out, v.name)
     table = np.tile(base, (runs, 1)) if current is None else current
-    rotating = np.array([b.joint.type != "prismatic" for b in model.moving_bodies])
     for k in columns:
-        if v.percent is not None and v.name in ANGLE_TARGETS:
-            raise ValueError(f"--vary {v.text!r}: give {v.name} as a range LO:HI (degrees)")
         values = _uniform(v, base[k], runs, rng)
-        if v.percent is None and v.name in ANGLE_TARGETS and rotating[k]:
+        if v.percent is None and v.name in ANGLE_TARGETS and entries[k].unit == "rad":
             values = np.radians(values)
         table[:, k] = values
     setattr(out, v.name, table)
+
+
+def _state_columns(v: Variation, entries: list[Entry], model_name: str) -> list[int]:
+    """The entries a state --vary draws: the one it names, or every joint's (a floating
+    joint's entries only when named: its position and velocity, never its quaternion)."""
+    if v.coordinate is None:
+        columns = [k for k, e in enumerate(entries) if not e.floating]
+        if not columns and v.name in ("kp", "kd", "target"):
+            raise ValueError(f"--vary {v.text!r}: '{model_name}' has no joint, only a "
+                             f"floating base, which has no actuator: its {v.name} is not used")
+        if not columns:
+            floating = ", ".join(e.name for e in entries if e.unit != "1")
+            raise ValueError(f"--vary {v.text!r}: '{model_name}' has no joint, only a "
+                             f"floating base: name one of its entries, {v.name}.NAME "
+                             f"(NAME one of {floating})")
+        return columns
+    names = [e.name for e in entries]
+    if v.coordinate not in names:
+        what = "entry of q" if v.name == "q0" else "coordinate"
+        raise KeyError(f"--vary {v.text!r}: no {what} '{v.coordinate}' "
+                       f"({v.name}: {', '.join(names)})")
+    entry = entries[names.index(v.coordinate)]
+    if entry.unit == "1":
+        quaternion = ", ".join(e.name for e in entries if e.joint == entry.joint
+                               and e.unit == "1")
+        position = ", ".join(e.name for e in entries if e.joint == entry.joint
+                             and e.unit == "m")
+        raise ValueError(f"--vary {v.text!r}: {entry.name} is an entry of the unit "
+                         f"quaternion of floating joint '{entry.joint}' ({quaternion}), which "
+                         "cannot be drawn as an angle: vary the joints (q0=LO:HI) or the "
+                         f"joint's position ({position}, in m)")
+    if entry.floating and v.name in ("kp", "kd", "target"):
+        raise ValueError(f"--vary {v.text!r}: {entry.name} is a coordinate of floating "
+                         f"joint '{entry.joint}', which has no actuator: its {v.name} is "
+                         "not used")
+    return [names.index(v.coordinate)]
 
 
 def _uniform(v: Variation, default: float, runs: int, rng) -> np.ndarray:
@@ -153,12 +221,18 @@ def _uniform(v: Variation, default: float, runs: int, rng) -> np.ndarray:
 # ------------------------------------------------------------------------------ stores
 
 
+def _result_widths(nq: int, nv: int) -> dict[str, int]:
+    """The last axis of each result array: q has nq entries, qd and tau nv."""
+    return {"q": nq, "qd": nv, "tau": nv}
+
+
 class NpzStore:
     """The whole sweep in memory, written by np.savez_compressed at the end."""
 
-    def __init__(self, path: Path, runs: int, t: np.ndarray, n: int, attrs: dict):
+    def __init__(self, path: Path, runs: int, t: np.ndarray, nq: int, nv: int, attrs: dict):
         self.path, self.attrs = path, attrs
-        self.arrays = {name: np.empty((runs, t.size, n)) for name in ("q", "qd", "tau")}
+        self.arrays = {name: np.empty((runs, t.size, width))
+                       for name, width in _result_widths(nq, nv).items()}
         self.arrays["t"] = t
 
     def put(self, name: str, start: int, values: np.ndarray) -> None:
@@ -177,7 +251,7 @@ class NpzStore:
 class ZarrStore:
     """A Zarr group: arrays chunked along the runs, written block by block."""
 
-    def __init__(self, path: Path, runs: int, t: np.ndarray, n: int, attrs: dict):
+    def __init__(self, path: Path, runs: int, t: np.ndarray, nq: int, nv: int, attrs: dict):
         try:
             import zarr
         except ImportError:
@@ -188,12 +262,12 @@ class ZarrStore:
                                   "overwriting it")
         self.group = zarr.open_group(str(path), mode="w")
         self.group.attrs.update(attrs)
-        self.chunk = max(1, CHUNK_BYTES // (t.size * n * 8))
+        self.chunk = max(1, CHUNK_BYTES // (t.size * max(nq, nv) * 8))
         self.runs = runs
         self.group.create_array("t", data=t)
-        for name in ("q", "qd", "tau"):
-            self.group.create_array(name, shape=(runs, t.size, n), dtype="f8",
-                                    chunks=(min(self.chunk, runs), t.size, n))
+        for name, width in _result_widths(nq, nv).items():
+            self.group.create_array(name, shape=(runs, t.size, width), dtype="f8",
+                                    chunks=(min(self.chunk, runs), t.size, width))
 
     def put(self, name: str, start: int, values: np.ndarray) -> None:
         if name not in self.group:
@@ -206,13 +280,14 @@ class ZarrStore:
         self.group.attrs.update(attrs)
 
 
-def open_store(path: Path, runs: int, t: np.ndarray, n: int, attrs: dict):
-    """A store for `path` by its suffix: .zarr (streamed) or .npz (in memory)."""
+def open_store(path: Path, runs: int, t: np.ndarray, nq: int, nv: int, attrs: dict):
+    """A store for `path` by its suffix: .zarr (streamed) or .npz (in memory); q has nq
+    entries per sample, qd and tau nv."""
     suffix = path.suffix.lower()
     if suffix == ".zarr":
-        return ZarrStore(path, runs, t, n, attrs)
+        return ZarrStore(path, runs, t, nq, nv, attrs)
     if suffix == ".npz":
-        return NpzStore(path, runs, t, n, attrs)
+        return NpzStore(path, runs, t, nq, nv, attrs)
     raise ValueError(f"--out {path}: the file must end in .zarr or .npz")
 
 
@@ -358,8 +433,8 @@ class SweepRun:
     model: object
     runs: int
     failed: int
-    final: np.ndarray  # (runs, n) final coordinates, NaN for failed runs
-    nominal_final: np.ndarray
+    final: np.ndarray  # (runs, nq) final configurations, NaN for failed runs
+    nominal_final: np.ndarray  # (nq,)
     seconds: float
     files: list[Path] = field(default_factory=list)
     statistics: list[dict] = field(default_factory=list)
@@ -371,9 +446,14 @@ def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
               threads: int | None = None, scheduler: str | None = None,
               out: str | Path | None = None, cache_dir=None, plot: bool = True,
               block_runs: int | None = None, html: bool = False, html_runs=None,
-              html_mode: str = "overlay", package_dirs=None) -> SweepRun:
+              html_mode: str = "overlay", package_dirs=None, strict: bool = False,
+              floating_base: bool = False) -> SweepRun:
     """Run `runs` simulations of `model` under the `simulate` command's controller, with the
     --vary draws; stream them to `out` in blocks; plot the fan and write the statistics.
+
+    Every run starts from `dyn.neutral()` at rest, but for its draws (a floating base: at
+    the world's origin, unrotated; see the module docstring for what q0 and qd0 vary
+    there). `strict` and `floating_base` are `gagen.load`'s.
 
     `html` also writes `out`'s stem + .html: the runs `html_runs` (default: the nominal run,
     then the first HTML_RUNS - 1 runs that reached the end) in 3-D, overlaid with all but
@@ -388,34 +468,39 @@ def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
             raise ValueError(f"--html-runs {i}: there are runs 0 to {runs - 1}")
     if out:  # a first look with one coordinate, before the model is even read
         check_store_fits(Path(out), runs, points, 1, 1, 0)
-    model = resolve_model(model)
+    model = resolve_model(model, strict, floating_base)
     path = Path(out) if out else default_out(model)
     check_store_fits(path, runs, points, model.nq, model.dof, len(model.parameters),
                      per_run_controllers=any(v.name in ("kp", "kd", "target") for v in parsed))
     model, dyn = load_dynamics(model, "compiled", cache_dir)
     nominal = default_controller(dyn)
-    draws = draw_inputs(parsed, runs, dyn, model, nominal, seed)
+    draws = draw_inputs(parsed, runs, dyn, nominal, seed)
     controller = nominal
     if draws.kp is not None or draws.kd is not None or draws.target is not None:
-        spec = nominal.c_spec(dyn.n)
+        spec = nominal.c_spec(dyn.nv)
         controller = [PD(kp=_row(draws.kp, i, spec["kp"]), kd=_row(draws.kd, i, spec["kd"]),
                          target=_row(draws.target, i, spec["target"]),
                          gravity_compensation=nominal.gravity_compensation)
                       for i in range(runs)]
     options = {"h": step} if method == "rk4" else {}
     span, t_eval = (0.0, duration), np.linspace(0.0, duration, points)
-    plan = prepare_batch(dyn, span, draws.q0 if draws.q0 is not None else np.zeros((runs, dyn.n)),
-                         draws.qd0, controller, draws.p or None, method, rtol, atol, t_eval,
-                         **options)
-    nominal_run = simulate(dyn, span, np.zeros(dyn.n), None, nominal, method=method, rtol=rtol,
-                           atol=atol, t_eval=t_eval, **options)
+    q0 = draws.q0 if draws.q0 is not None else np.tile(dyn.neutral(), (runs, 1))
+    plan = prepare_batch(dyn, span, q0, draws.qd0, controller, draws.p or None, method, rtol,
+                         atol, t_eval, **options)
+    try:
+        nominal_run = simulate(dyn, span, dyn.neutral(), None, nominal, method=method,
+                               rtol=rtol, atol=atol, t_eval=t_eval, **options)
+    except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:  # say which run
+        raise type(exc)(f"the nominal run (no --vary draw): {exc}") from None
     path.parent.mkdir(parents=True, exist_ok=True)
-    attrs = {"model": model.name, "coordinates": list(dyn.coordinates),
-             "parameters": list(dyn.parameters), "method": method, "rtol": rtol,
-             "atol": atol, "duration": duration, "runs": runs, "seed": seed,
-             "vary": [v.text for v in parsed], "controller": repr(nominal)}
-    store = open_store(path, runs, t_eval, dyn.n, attrs)
-    size = block_runs or _block_runs(runs, points, dyn.n, getattr(store, "chunk", 1))
+    attrs = {"model": model.name, "configuration": list(dyn.configuration),
+             "coordinates": list(dyn.coordinates), "parameters": list(dyn.parameters),
+             "method": method, "rtol": rtol, "atol": atol, "duration": duration,
+             "runs": runs, "seed": seed, "vary": [v.text for v in parsed],
+             "controller": repr(nominal)}
+    store = open_store(path, runs, t_eval, dyn.nq, dyn.nv, attrs)
+    size = block_runs or _block_runs(runs, points, dyn.nq + 2 * dyn.nv,
+                                     getattr(store, "chunk", 1))
     log.info(f"{runs:,} runs of {duration:g} s with {method}, in {len(blocks(runs, size))} "
              f"block(s) of up to {size:,} runs, to {path}")
     start = time.perf_counter()
@@ -433,16 +518,34 @@ def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
     run.statistics = final_statistics(run, dyn)
     run.files.append(write_statistics(run, path.with_name(f"{path.stem}_final.csv")))
     if plot:
-        from .figures import fig2_fan
-
-        log.info("plotting...")
-        run.files.append(fig2_fan(t_eval, fan, nominal_run.q, model,
-                                  path.with_name(f"{path.stem}_fan.png"), total=runs))
+        figure = _plot_fan(t_eval, fan, nominal_run.q, model, dyn,
+                           path.with_name(f"{path.stem}_fan.png"), runs)
+        run.files += [figure] if figure is not None else []
     if picked is not None:
         run.files.append(_write_html(path.with_name(f"{path.stem}.html"), dyn, plan,
                                      nominal_run, picked, html_runs is None, html_mode,
                                      package_dirs))
     return run
+
+
+def _plot_fan(t, fan, nominal_q, model, dyn, path: Path, total: int) -> Path | None:
+    """The fan figure of the joints (a floating base's entries left out: its path is in
+    the store); None, with a log line, for a model with no joint."""
+    from .figures import fig2_fan
+
+    shown = model
+    if dyn.nq != dyn.nv:
+        from ..runtime.manifold import plain_entries
+        from .runs import _joints_only
+
+        joints, _ = plain_entries(dyn.info)
+        if not joints.size:
+            log.info("no fan figure: the model has no joint, only a floating base (its path "
+                     "is in the store)")
+            return None
+        fan, nominal_q, shown = fan[:, :, joints], nominal_q[:, joints], _joints_only(model)
+    log.info("plotting...")
+    return fig2_fan(t, fan, nominal_q, shown, path, total=total)
 
 
 HTML_RUNS = 10  # runs the HTML file shows by default (the nominal one and 9 more)
@@ -492,18 +595,18 @@ def _write_html(path: Path, dyn, plan: BatchPlan, nominal, picked: PickedRuns,
 
 def _run_blocks(dyn, plan: BatchPlan, store, size: int, threads, client,
                 picked: PickedRuns | None = None):
-    """Run the plan block by block into the store: (final q (N, n), NaN for failed runs;
+    """Run the plan block by block into the store: (final q (N, nq), NaN for failed runs;
     the first FAN_RUNS runs' q; the messages of up to FAILURES_KEPT failed runs); the
     runs of the HTML file go to `picked`."""
     runs = plan.runs
     progress = ProgressBar(runs)
-    final = np.full((runs, dyn.n), np.nan)
+    final = np.full((runs, dyn.nq), np.nan)
     fan = None
     failures: dict[str, str] = {}
     for a, b in blocks(runs, size):
         res = run_batch(dyn, plan.rows(a, b), threads=threads, client=client,
                         progress=lambda done, _total, a=a: progress(a + done))
-        _store_block(store, plan, a, b, res)
+        _store_block(store, plan, a, b, res, dyn.nq)
         final[a:b][res.ok] = res.q[res.ok, -1]
         for i in np.flatnonzero(~res.ok)[: max(0, FAILURES_KEPT - len(failures))]:
             failures[str(a + i)] = res.message[i]
@@ -529,24 +632,27 @@ def _client(scheduler: str | None):
     return Client(scheduler, timeout=30)
 
 
-def _block_runs(runs: int, points: int, n: int, chunk: int) -> int:
-    """Runs per block: q, qd, tau of a block within BLOCK_BYTES, a whole number of chunks."""
-    size = max(1, BLOCK_BYTES // (3 * points * n * 8))
+def _block_runs(runs: int, points: int, width: int, chunk: int) -> int:
+    """Runs per block: q, qd, tau of a block (`width` = nq + 2 nv values a sample) within
+    BLOCK_BYTES, a whole number of chunks."""
+    size = max(1, BLOCK_BYTES // (points * width * 8))
     return min(runs, max(chunk, size // chunk * chunk))
 
 
-def _store_block(store, plan: BatchPlan, a: int, b: int, res) -> None:
+def _store_block(store, plan: BatchPlan, a: int, b: int, res, nq: int) -> None:
+    """Runs a .. b-1 into the store: results, statistics and inputs (q0 (., nq), qd0, kp,
+    kd, target (., nv))."""
     for name in ("q", "qd", "tau"):
         store.put(name, a, getattr(res, name))
     for name in ("status", "nfev", "steps", "rejected"):
         store.put(name, a, getattr(res, name))
-    n = plan.y0.shape[1] // 2
-    store.put("q0", a, plan.y0[a:b, :n])
-    store.put("qd0", a, plan.y0[a:b, n:])
+    nv = plan.y0.shape[1] - nq
+    store.put("q0", a, plan.y0[a:b, :nq])
+    store.put("qd0", a, plan.y0[a:b, nq:])
     rows = plan.rows(a, b)
     store.put("p", a, np.broadcast_to(rows.p, (b - a, plan.p.shape[1])))
     for name in ("kp", "kd", "target"):
-        store.put(name, a, np.broadcast_to(rows.control[name], (b - a, n)))
+        store.put(name, a, np.broadcast_to(rows.control[name], (b - a, nv)))
 
 
 class ProgressBar:
@@ -580,15 +686,16 @@ STAT_COLUMNS = ("coordinate", "unit", "nominal", "mean", "std", "min", "p5", "me
 
 
 def final_statistics(run: SweepRun, dyn) -> list[dict]:
-    """Per coordinate: the final value's nominal, mean, std, min, percentiles and max over
-    the runs that reached the end (degrees for rotating joints, m for prismatic)."""
+    """Per entry of q (`dyn.configuration`): the final value's nominal, mean, std, min,
+    percentiles and max over the runs that reached the end (degrees for rotating joints,
+    m for prismatic ones and a floating base's position, unitless "1" for its quaternion)."""
     good = run.final[~np.isnan(run.final).any(axis=1)]
     rows = []
-    for k, (name, body) in enumerate(zip(dyn.coordinates, run.model.moving_bodies)):
-        degrees = body.joint.type != "prismatic"
+    for k, entry in enumerate(state_entries(dyn.info, configuration=True)):
+        degrees = entry.unit == "rad"
         scale = 180.0 / math.pi if degrees else 1.0
         x = good[:, k] * scale
-        row = {"coordinate": name, "unit": "deg" if degrees else "m",
+        row = {"coordinate": entry.name, "unit": "deg" if degrees else entry.unit,
                "nominal": run.nominal_final[k] * scale}
         if x.size:
             p5, median, p95 = np.percentile(x, [5, 50, 95])
@@ -615,12 +722,13 @@ def print_sweep_report(run: SweepRun) -> None:
           f"{run.failed:,} failed")
     print(f"gagen: final state over the runs that reached the end "
           f"({run.runs - run.failed:,}):")
-    print(f"  {'':<10}{'unit':>5}{'nominal':>10}{'mean':>10}{'std':>9}{'p5':>10}{'p95':>10}")
+    w = max([10] + [len(row["coordinate"]) + 1 for row in run.statistics])
+    print(f"  {'':<{w}}{'unit':>5}{'nominal':>10}{'mean':>10}{'std':>9}{'p5':>10}{'p95':>10}")
     for row in run.statistics:
         if "mean" not in row:
-            print(f"  {row['coordinate']:<10}{row['unit']:>5}{row['nominal']:>10.3f}   (no run)")
+            print(f"  {row['coordinate']:<{w}}{row['unit']:>5}{row['nominal']:>10.3f}   (no run)")
             continue
-        print(f"  {row['coordinate']:<10}{row['unit']:>5}{row['nominal']:>10.3f}"
+        print(f"  {row['coordinate']:<{w}}{row['unit']:>5}{row['nominal']:>10.3f}"
               f"{row['mean']:>10.3f}{row['std']:>9.3f}{row['p5']:>10.3f}{row['p95']:>10.3f}")
     for f in run.files:
         print(f"gagen: wrote {f}")

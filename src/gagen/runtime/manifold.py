@@ -270,9 +270,25 @@ def neutral(info) -> np.ndarray:
 
 
 def normalized(info, q) -> np.ndarray:
-    """q with each floating joint's quaternion scaled to unit norm (a fresh array)."""
+    """q with each floating joint's quaternion scaled to unit norm (a fresh array; see
+    `unit_quaternion` for quaternions whose squared norm overflows, zero or NaN ones)."""
     q = np.array(q, dtype=float)
     for iq, _ in floating_slices(info):
-        quat = q[..., iq + 3: iq + 7]
-        q[..., iq + 3: iq + 7] = quat / np.linalg.norm(quat, axis=-1, keepdims=True)
+        q[..., iq + 3: iq + 7] = unit_quaternion(q[..., iq + 3: iq + 7])
     return q
+
+
+def unit_quaternion(quat: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) divided by their norms, without a NumPy warning: one whose
+    squared norm overflows or underflows (the last samples of a diverging simulation) is
+    scaled by its largest entry first, and one that is zero or holds NaN or inf becomes
+    NaN (its simulation's status says why)."""
+    with np.errstate(over="ignore"):
+        norm = np.linalg.norm(quat, axis=-1, keepdims=True)
+    fine = np.isfinite(norm) & (norm > 0)
+    if fine.all():
+        return quat / norm  # the usual case, one division
+    with np.errstate(all="ignore"):
+        scaled = quat / np.max(np.abs(quat), axis=-1, keepdims=True)  # NaN: zero, inf, NaN
+        scaled /= np.linalg.norm(scaled, axis=-1, keepdims=True)
+        return np.where(fine, quat / norm, scaled)
