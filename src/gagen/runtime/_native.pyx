@@ -114,6 +114,33 @@ cdef extern from "gagen_api.h" nogil:
         int (*operational_space_inertia)(const double *q, const double *p, int count,
                                          const int *frames, int dims, double *work,
                                          double *Lambda) noexcept nogil
+        int nc, ncrows
+        int (*constraint_jacobian)(const double *q, const double *p,
+                                   const unsigned char *active, double *J) noexcept nogil
+        int (*constraint_drift)(const double *q, const double *qd, const double *p,
+                                const unsigned char *active, double *drift) noexcept nogil
+        int (*constraint_error)(const double *q, const double *p, const unsigned char *active,
+                                double *error) noexcept nogil
+        int (*constrained_forward_dynamics)(const double *q, const double *qd,
+                                            const double *tau, const double *p,
+                                            const unsigned char *active, double kp,
+                                            double kd, double damping, double *qdd,
+                                            double *forces) noexcept nogil
+        int (*impulse_dynamics)(const double *q, const double *qd_minus, const double *p,
+                                const unsigned char *active, double restitution,
+                                double damping, double *qd_plus,
+                                double *impulses) noexcept nogil
+        int (*simulate_constrained)(int method, const gagen_control *c, const double *p,
+                                    const unsigned char *active, double kp, double kd,
+                                    double damping, double t0, double t1, const double *y0,
+                                    double rtol, const double *atol, double first_step,
+                                    double max_step, long max_steps, double h,
+                                    const double *t_eval, int n_eval, double *y_out,
+                                    gagen_ode_stats *stats) noexcept nogil
+        int (*constrained_outputs)(const gagen_control *c, const double *p,
+                                   const unsigned char *active, double kp, double kd,
+                                   double damping, long m, const double *t, const double *y,
+                                   double *forces, double *errors) noexcept nogil
     ctypedef struct gagen_derivatives_api:
         int version
         const char *ident
@@ -176,6 +203,10 @@ cdef extern from *:
 # per state, 20 MB per 1000 states). Smaller outputs stay in the cache for the caller.
 STREAM_STATE = 256
 STREAM_BYTES = 4 << 20
+
+# the default Baumgarte gains of the constrained dynamics (no correction): a call that keeps
+# them skips their checks
+_NO_GAINS = (0.0, 0.0)
 
 MODEL_CAPSULE = "gagen.model_api"
 DERIVATIVES_CAPSULE = "gagen.derivatives_api"
@@ -443,9 +474,10 @@ cdef class CompiledModel(_Evaluator):
     cdef readonly object external_forces
     cdef dict _frame_numbers  # frame name -> number
     cdef object _frame_index  # (frame) -> number, or the error that names the choices
+    cdef object _constraints  # the per-call arguments' checks (runtime.constraints.Arguments)
 
     def __init__(self, capsule, parameter_vector, external_forces=None, quaternions=(),
-                 frame_numbers=None, frame_index=None):
+                 frame_numbers=None, frame_index=None, constraints=None):
         self.api = <const gagen_model_api *>_table(capsule, MODEL_CAPSULE)
         self._adopt(capsule, self.api.ident, self.api.np, self.api.err_nonfinite,
                     self.api.parameter_defaults)
@@ -454,6 +486,134 @@ cdef class CompiledModel(_Evaluator):
         self.external_forces = external_forces
         self._frame_numbers = dict(frame_numbers or {})
         self._frame_index = frame_index
+        self._constraints = constraints
+
+    # --- constraints (conventions: gagen.constraints; equations: gagen.runtime.constraints)
+
+    def constrained_forward_dynamics(self, q, qd, tau, active=None, baumgarte=_NO_GAINS,
+                                     fext=None, damping=0.0, p=None):
+        """(qdd, forces) of the constrained forward dynamics (Dynamics's documentation)."""
+        cdef const gagen_model_api *api = self.api
+        cdef double kp = 0.0, kd = 0.0, dmp = 0.0
+        cdef object mask = None
+        if active is not None:
+            mask = self._constraints.rows(active)[0]
+        if baumgarte is not _NO_GAINS:
+            kp, kd = self._constraints.gains(baumgarte)
+        if not (type(damping) is float and damping == 0.0):
+            dmp = self._constraints.damping(damping)
+        if fext is not None:
+            (q, tau), _ = as_states((api.nq, api.nv), q, tau, names=("q", "tau"))
+            tau = tau + self.external_forces(q, fext, p)
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef cnp.ndarray b = _state(qd, "qd", api.nv)
+        cdef cnp.ndarray c = _state(tau, "tau", api.nv)
+        cdef list keep = None if p is None else []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(c, _rows(b, _rows(a, -1, "q"), "qd"), "tau")
+        self._check_quaternions(a, rows, "q")
+        cdef cnp.ndarray qdd = _vectors(rows, api.nv)
+        cdef cnp.ndarray forces = _vectors(rows, api.ncrows)
+        cdef const unsigned char *act = NULL if mask is None \
+            else <const unsigned char *>cnp.PyArray_DATA(<cnp.ndarray>mask)
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *pc = _data(c)
+        cdef double *po = _data(qdd)
+        cdef double *pf = _data(forces)
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), sc = _step(c), i, failed = -1
+        cdef int nv = api.nv, nr = api.ncrows, code, status = 0
+        if rows < 0:  # one state: releasing the GIL would cost more than the kernel
+            status = api.constrained_forward_dynamics(pa_, pb, pc, pp, act, kp, kd, dmp, po, pf)
+        else:
+            with nogil:
+                for i in range(rows):
+                    code = api.constrained_forward_dynamics(pa_ + i * sa, pb + i * sb,
+                                                            pc + i * sc, pp, act, kp, kd, dmp,
+                                                            po + i * nv, pf + i * nr)
+                    if code != 0 and failed < 0:
+                        failed = i
+                        status = code
+        if status:
+            self._constraint_failure(status, failed if rows >= 0 else -1, a, mask, dmp, p)
+        return qdd, forces
+
+    def impulse_dynamics(self, q, qd_minus, active=None, restitution=0.0, damping=0.0,
+                         p=None):
+        """(qd_plus, impulses) at an impact (Dynamics's documentation)."""
+        cdef const gagen_model_api *api = self.api
+        mask, _, r, dmp = self._constraints.impulse_arguments(active, restitution, damping)
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef cnp.ndarray b = _state(qd_minus, "qd_minus", api.nv)
+        cdef list keep = None if p is None else []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(b, _rows(a, -1, "q"), "qd_minus")
+        self._check_quaternions(a, rows, "q")
+        cdef cnp.ndarray out = _vectors(rows, api.nv)
+        cdef cnp.ndarray impulses = _vectors(rows, api.ncrows)
+        cdef const unsigned char *act = NULL if mask is None \
+            else <const unsigned char *>cnp.PyArray_DATA(<cnp.ndarray>mask)
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *po = _data(out)
+        cdef double *pf = _data(impulses)
+        cdef double rr = r, dd = dmp
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), i, failed = -1
+        cdef Py_ssize_t count = rows if rows >= 0 else 1
+        cdef int nv = api.nv, nr = api.ncrows, code, status = 0
+        with nogil:
+            for i in range(count):
+                code = api.impulse_dynamics(pa_ + i * sa, pb + i * sb, pp, act, rr, dd,
+                                            po + i * nv, pf + i * nr)
+                if code != 0 and failed < 0:
+                    failed = i
+                    status = code
+        if status:
+            self._constraint_failure(status, failed if rows >= 0 else -1, a, mask, dd, p)
+        return out, impulses
+
+    def constraint_rows(self, int which, q, qd=None, active=None, p=None):
+        """The active constraints' Jacobian (which 0: (m, NV)), drift (1: (m,), at qd) or
+        position error (2: (m,)), at one state or stacked states."""
+        cdef const gagen_model_api *api = self.api
+        mask, m = self._constraints.rows(active)
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef cnp.ndarray b = _state(qd, "qd", api.nv) if which == 1 else a
+        cdef list keep = None if p is None else []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(a, -1, "q")
+        if which == 1:
+            rows = _rows(b, rows, "qd")
+        self._check_quaternions(a, rows, "q")
+        cdef Py_ssize_t nout = m * api.nv if which == 0 else m
+        cdef cnp.ndarray out = _matrices(rows, m, api.nv) if which == 0 else _vectors(rows, m)
+        cdef const unsigned char *act = NULL if mask is None \
+            else <const unsigned char *>cnp.PyArray_DATA(<cnp.ndarray>mask)
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *po = _data(out)
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), i
+        cdef Py_ssize_t count = rows if rows >= 0 else 1
+        with nogil:
+            for i in range(count):
+                if which == 0:
+                    api.constraint_jacobian(pa_ + i * sa, pp, act, po + i * nout)
+                elif which == 1:
+                    api.constraint_drift(pa_ + i * sa, pb + i * sb, pp, act, po + i * nout)
+                else:
+                    api.constraint_error(pa_ + i * sa, pp, act, po + i * nout)
+        return out
+
+    cdef _constraint_failure(self, int status, Py_ssize_t row, cnp.ndarray q, object mask,
+                             double damping, object p):
+        """Raise for a constrained kernel's failure at one state (row -1) or a stacked row:
+        M's errors as forward dynamics's, dependent rows naming them."""
+        if status == 1 or status == self.err_nonfinite:
+            self._failed(row, status, q)
+        if status == 4:
+            self._constraints.singular(q if row < 0 else q[row], mask, damping, row, p)
+        raise ValueError(f"the constrained dynamics of model '{self.ident}' refused its "
+                         f"arguments (status {status})")
 
     cdef object _run(self, Kernel kernel, Py_ssize_t nout, object x, object y, object z,
                      object p, str nx, str ny, str nz):
