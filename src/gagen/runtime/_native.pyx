@@ -1093,6 +1093,14 @@ cdef cnp.ndarray _frame_numbers(object frames, int nf):
     return fr
 
 
+def _constraint_mask(active, int nc):
+    """The active constraints as a fresh uint8 array of nc flags."""
+    mask = np.ascontiguousarray(active, dtype=np.uint8).ravel().copy()
+    if mask.size != nc:
+        raise ValueError(f"active must have {nc} flags, one per constraint; got {mask.size}")
+    return mask
+
+
 cdef int _method_code(str method) except -1:
     if method == "dopri5":
         return GAGEN_METHOD_DOPRI5
@@ -1108,11 +1116,19 @@ cdef class CompiledSimulation:
     cdef gagen_control ctl
     cdef const double *p
     cdef object _keep
+    # a constrained run: the active constraints (one byte each), Baumgarte's gains, damping
+    cdef object _active
+    cdef double kp_c, kd_c, damping_c
 
     def __init__(self, CompiledModel model, p, int kind, kp=None, kd=None, target=None,
                  bint gravity_compensation=False, traj_q0=None, traj_qf=None,
-                 double traj_Tp=1.0, feedforward=None, frames=None, wrenches=None):
+                 double traj_Tp=1.0, feedforward=None, frames=None, wrenches=None,
+                 active=None, baumgarte=(0.0, 0.0), double damping=0.0):
         self.api = model.api
+        if active is not None:
+            self._active = _constraint_mask(active, self.api.nc)
+            self.kp_c, self.kd_c = (float(x) for x in baumgarte)
+            self.damping_c = damping
         cdef int nq = self.api.nq, nv = self.api.nv
         params = model._parameters(model.parameter_vector(None) if p is None else p)
         arrays = [params] + [None if v is None else _vector(v, size, name) for v, name, size in
@@ -1167,20 +1183,41 @@ cdef class CompiledSimulation:
         cdef Py_ssize_t i
         raised = []  # what a signal handler raised while the integrator ran (Ctrl-C)
         self.ctl.poll_ctx = <void *>raised
+        cdef bint held = self._active is not None
+        cdef const unsigned char *act = NULL
+        cdef double kc = self.kp_c, dc = self.kd_c, mu = self.damping_c
+        cdef cnp.ndarray forces = _matrix(m, api.ncrows), errors = _matrix(m, api.ncrows)
+        cdef double *pf = _data(forces)
+        cdef double *pe = _data(errors)
+        if held:
+            act = <const unsigned char *>cnp.PyArray_DATA(<cnp.ndarray>self._active)
         with nogil:
-            status = api.simulate(code, &self.ctl, self.p, t0, t1, py0, rtol, pat,
-                                  first_step, max_step, max_steps, h, pt, m, py, &stats)
+            if held:
+                status = api.simulate_constrained(code, &self.ctl, self.p, act, kc, dc, mu, t0,
+                                                  t1, py0, rtol, pat, first_step, max_step,
+                                                  max_steps, h, pt, m, py, &stats)
+            else:
+                status = api.simulate(code, &self.ctl, self.p, t0, t1, py0, rtol, pat,
+                                      first_step, max_step, max_steps, h, pt, m, py, &stats)
             _split_states(py, m, nq, nv, pq, pqd)
             if status == 0:  # the controller passed the integrator's checks: no new status
                 api.control_torques(&self.ctl, self.p, m, pt, py, ptau)
+                if held:
+                    api.constrained_outputs(&self.ctl, self.p, act, kc, dc, mu, m, pt, py, pf,
+                                            pe)
             else:
                 for i in range(m * nv):
                     ptau[i] = NAN
+                for i in range(m * api.ncrows):
+                    pf[i] = NAN
+                    pe[i] = NAN
         self.ctl.poll_ctx = NULL
         if raised:
             raise raised[0]
         info = {"nfev": stats.nfev, "nsteps": stats.nsteps, "naccepted": stats.naccepted,
                 "nrejected": stats.nrejected}
+        if held:
+            info["forces"], info["errors"] = forces, errors
         return q, qd, tau, status, info
 
     def torques(self, t, y):
@@ -1265,12 +1302,19 @@ cdef class CompiledBatch:
     cdef double *qd
     cdef double *tau
     cdef int64_t *stats
+    # a constrained batch: the active constraints, gains, damping, and where the forces and
+    # errors go ((N, m, rows) each)
+    cdef const unsigned char *active
+    cdef double kp_c, kd_c, damping_c
+    cdef double *forces
+    cdef double *errors
 
     def __init__(self, CompiledModel model, str method, double t0, double t1, t_eval,
                  double rtol, atol, double first_step, double max_step, long max_steps,
                  double h, y0, p, kind, gravity_compensation, kp, kd, target, traj_q0,
                  traj_qf, traj_Tp, q, qd, tau, stats, feedforward=None, frames=None,
-                 wrenches=None):
+                 wrenches=None, active=None, baumgarte=(0.0, 0.0), double damping=0.0,
+                 forces=None, errors=None):
         self.api = model.api
         self.code = _method_code(method)
         cdef int nq = self.api.nq, nv = self.api.nv, ny = nq + nv
@@ -1301,8 +1345,17 @@ cdef class CompiledBatch:
         cdef cnp.ndarray st = _runs_table(stats, N, 5, cnp.NPY_INT64, "stats")
         if st.shape[0] != N:
             raise ValueError(f"stats must have shape ({N}, 5)")
+        mask = None
+        if active is not None:
+            mask = _constraint_mask(active, self.api.nc)
+            self.active = <const unsigned char *>cnp.PyArray_DATA(<cnp.ndarray>mask)
+            self.kp_c, self.kd_c = (float(x) for x in baumgarte)
+            self.damping_c = damping
+            self.forces = _output(forces, N, self.m, self.api.ncrows, "forces")
+            self.errors = _output(errors, N, self.m, self.api.ncrows, "errors")
         # pointed into; the model keeps its table alive
-        self._keep = [te, y, pp, kd_, gc, tp, cs, q, qd, tau, st, fr, wr, at, model]
+        self._keep = [te, y, pp, kd_, gc, tp, cs, q, qd, tau, st, fr, wr, at, model, mask,
+                      forces, errors]
         self.t0, self.t1, self.rtol, self.h = t0, t1, rtol, h
         self.first_step, self.max_step, self.max_steps = first_step, max_step, max_steps
         self.at = _data(at)
@@ -1369,16 +1422,33 @@ cdef class CompiledBatch:
         ctl.poll = _poll_flag
         ctl.poll_ctx = <void *>&self.stop_flag
         st.nfev = st.nsteps = st.naccepted = st.nrejected = 0
-        cdef int status = self.api.simulate(self.code, &ctl, p, self.t0, self.t1,
-                                            self.y0 + i * self.y_step * (nq + nv), self.rtol,
-                                            self.at, self.first_step, self.max_step,
-                                            self.max_steps, self.h, self.te, m, y, &st)
+        cdef int status
+        cdef Py_ssize_t rows = self.api.ncrows
+        if self.active != NULL:
+            status = self.api.simulate_constrained(
+                self.code, &ctl, p, self.active, self.kp_c, self.kd_c, self.damping_c, self.t0,
+                self.t1, self.y0 + i * self.y_step * (nq + nv), self.rtol, self.at,
+                self.first_step, self.max_step, self.max_steps, self.h, self.te, m, y, &st)
+        else:
+            status = self.api.simulate(self.code, &ctl, p, self.t0, self.t1,
+                                       self.y0 + i * self.y_step * (nq + nv), self.rtol,
+                                       self.at, self.first_step, self.max_step,
+                                       self.max_steps, self.h, self.te, m, y, &st)
         _split_states(y, m, nq, nv, q, qd)
         if status == 0:
             self.api.control_torques(&ctl, p, m, self.te, y, tau)
+            if self.active != NULL:
+                self.api.constrained_outputs(&ctl, p, self.active, self.kp_c, self.kd_c,
+                                             self.damping_c, m, self.te, y,
+                                             self.forces + i * m * rows,
+                                             self.errors + i * m * rows)
         else:
             for k in range(m * nv):
                 tau[k] = NAN
+            if self.active != NULL:
+                for k in range(m * rows):
+                    self.forces[i * m * rows + k] = NAN
+                    self.errors[i * m * rows + k] = NAN
         cdef int64_t *s = self.stats + i * 5
         s[0] = status
         s[1] = st.nfev

@@ -342,8 +342,8 @@ def singular_constraints(info: ModelInfo, mask, row: int, stacked_row: int = -1)
     """The SingularConstraintError for the active rows when row `row` (among them) depends
     on those before it."""
     names = row_names(info, mask)
-    which = f": row {names[row]} depends on the rows before it" if 0 <= row < len(names) \
-        else ""
+    which = f": row {names[row]} is zero or depends on the rows before it" \
+        if 0 <= row < len(names) else ""
     where = "" if stacked_row < 0 else f" (stacked input, row {stacked_row})"
     active = ", ".join(repr(c.name) for c, on in zip(info.constraints, mask) if on)
     return SingularConstraintError(one_line(
