@@ -39,7 +39,7 @@ from .stages import StageSplit, split_stages
 
 # copied verbatim next to the generated sources (templates/c/)
 COPIED_FILES = ("integrator.c", "integrator.h", "gagen_ode.h", "gagen_second_order.h",
-                "gagen_math.h", "gagen_api.h")
+                "gagen_generic.h", "gagen_math.h", "gagen_api.h")
 # the C files of a model, all compiled into its module (plain C, usable without Python)
 MODEL_C_FILES = ("mass_matrix.c", "rhs.c", "simulation.c", "inverse_dynamics.c", "frames.c",
                  "regressor.c", "centroidal.c", "integrator.c")
