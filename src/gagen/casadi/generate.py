@@ -43,10 +43,11 @@ class Signature:
 
 def prefix_of(ident: str) -> str:
     """The prefix of a model's exported CasADi names (and files): `<ident>_casadi`, which no
-    kernel of the model's own C (`<ident>_<kernel>`) is named."""
+    kernel of the model's own C (`<ident>_<kernel>`) is named; runs of underscores become
+    one, as CasADi's function names must have."""
     if not _IDENT.match(ident):
         raise ValueError(f"'{ident}' is not a C identifier")
-    return f"{ident}_casadi"
+    return re.sub("_+", "_", f"{ident}_casadi")
 
 
 def function_name(prefix: str, entry: str, with_p: bool = False) -> str:
