@@ -167,8 +167,11 @@ def symbolic(function, kind):
 
 
 def frames_of(dyn, frames):
-    """Every frame of a small model; a spread of them otherwise."""
-    return list(range(len(frames))) if len(frames) <= 8 else list(range(0, len(frames), 3))
+    """Every frame of a small model; a spread of them otherwise, and the last link's."""
+    if len(frames) <= 14:
+        return list(range(len(frames)))
+    return sorted(set(range(0, len(frames), 3)) | {dyn.info.frames.index(max(
+        dyn.info.frames, key=lambda f: f[1]))})
 
 
 @pytest.mark.parametrize("kind", ["SX", "MX"])
@@ -225,8 +228,10 @@ def test_casadi_jacobians_match_central_differences(model):
         joined = ca.vertcat(*[ca.vec(o) for o in outs])
         jac = ca.Function("jacobian", symbols, [ca.jacobian(joined, s)
                                            for s, port in zip(symbols, ports) if port != "frame"])
-        frame = len(frames) - 1 if "frame" in ports else None
-        for q, qd, u in states(dyn, 2, seed=3):
+        cases = [(frame, state) for frame in (frames_of(dyn, frames) if "frame" in ports
+                                              else [None])
+                 for state in states(dyn, 2, seed=3)]
+        for frame, (q, qd, u) in cases:
             for iq, _ in dyn.info.floating_joints():
                 q[iq + 3: iq + 7] *= 1.3  # the functions normalise the quaternion
             values = {"q": q, "qd": qd, "u": u}
