@@ -421,3 +421,52 @@ def test_the_exported_library_works_without_gagen(tmp_path):
     close(np.reshape(out[f"{prefix}_frame_jacobian"][0], (6, -1)),
           dyn.frame_jacobian(q, frame), "J")
     close(out[f"{prefix}_inverse_dynamics_p"][0], dyn.inverse_dynamics(q, qd, tau), "tau")
+
+
+# --- optimisation: casadi.Opti and IPOPT on gagen's functions -------------------------------
+
+def test_ipopt_solves_a_swing_of_the_paper_s_robot_on_gagen_s_functions():
+    """A small swing (docs/casadi.md's problem on rrr): IPOPT converges with the exact
+    Hessian (differences of gagen's Jacobian) and with the limited-memory one, and each
+    optimum's torques replayed through gagen's own forward dynamics (RK4 in NumPy) reach
+    the goal at rest."""
+    from gagen.casadi.swing import swing
+
+    dyn = gagen.load("rrr", derivatives=True)
+    fd = gc.functions(dyn, ["forward_dynamics"])["forward_dynamics"]
+    start, goal, h = np.zeros(3), np.array([-1.0, -0.8, -0.4]), 2.0 / 12
+    for hessian in ("exact", "limited-memory"):
+        r = swing(fd, start, goal, duration=2.0, intervals=12,
+                  ipopt={"hessian_approximation": hessian})
+        assert r.success, hessian
+        x = np.zeros(6)
+        for tau in r.tau:
+            def rate(x, tau=tau):
+                return np.concatenate([x[3:], dyn.forward_dynamics(x[:3], x[3:], tau)])
+            k1 = rate(x)
+            k2 = rate(x + h / 2 * k1)
+            k3 = rate(x + h / 2 * k2)
+            k4 = rate(x + h * k3)
+            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        close(x, np.concatenate([goal, np.zeros(3)]), f"replayed ({hessian})", 1e-8)
+
+
+@pytest.mark.slow
+def test_the_swing_example_reaches_adam_s_optimum(tmp_path):
+    """docs/casadi_swing.py: the Panda's swing on gagen's functions and on adam's CasADi
+    dynamics converges to the same optimum (1e-6), and draws its figure."""
+    pytest.importorskip("adam.casadi", reason="the comparison needs adam-robotics")
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("casadi_swing",
+                                                  REPO / "docs" / "casadi_swing.py")
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    results = example.solve_both(SHARED_URDF / "panda.urdf", tmp_path)
+    ours, theirs = results["gagen"], results["adam"]
+    assert ours.success and theirs.success
+    close(ours.q, theirs.q, "q", 1e-6)
+    close(ours.tau, theirs.tau, "tau", 1e-6)
+    assert abs(ours.effort - theirs.effort) <= 1e-6 * ours.effort
+    example.draw(results, tmp_path / "swing.png")
+    assert (tmp_path / "swing.png").stat().st_size > 10_000

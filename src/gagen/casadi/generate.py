@@ -154,11 +154,11 @@ def generate_casadi(info: ModelInfo, ident: str, nreg: int, inertial: list[bool]
         ins = [(port.name, _size(port.rows, sizes)) for port in entry.inputs]
         outs = [(port.name, _size(port.rows, sizes), _size(port.cols, sizes))
                 for port in entry.outputs]
-        work = _work_sizes(entry, ins, outs, sizes)
-        rendered.append(_rendered_entry(entry, ident, ins, outs, work))
+        rendered.append(_rendered_entry(entry, ident, ins, outs))
         for with_p in (False, True):
             functions += _signatures(function_name(prefix, entry.name, with_p), entry,
-                                     with_p, ins, outs, patterns, np_, work)
+                                     with_p, ins, outs, patterns, np_,
+                                     _work_sizes(entry, ins, outs, sizes, with_p))
         summary.append(f"{function_name(prefix, entry.name)}({_ports(_with_frame(entry, ins))})"
                        f" -> ({_ports([(n, r * c) for n, r, c in outs])})")
     context = {
@@ -188,7 +188,7 @@ def _ports(ports) -> str:
     return ", ".join(f"{name}[{size}]" for name, size in ports)
 
 
-def _work_sizes(entry: Entry, ins, outs, sizes) -> dict[str, int]:
+def _work_sizes(entry: Entry, ins, outs, sizes, with_p: bool) -> dict[str, int]:
     """Upper bounds of the doubles of work a call and its Jacobian take (module
     docstring of templates/casadi.c.j2: the wrapper checks them as it takes)."""
     nq, nv, np_, nreg = sizes["nq"], sizes["nv"], sizes["np"], sizes["nreg"]
@@ -197,14 +197,14 @@ def _work_sizes(entry: Entry, ins, outs, sizes) -> dict[str, int]:
     central = widest + 2 * sum(numel)
     widths = [nv if k == 0 and entry.tangent and entry.jacobian else n
               for k, (_, n) in enumerate(ins)]
-    blocks = sum(m * (sum(widths) + np_) for m in numel)
+    blocks = sum(m * (sum(widths) + (np_ if with_p else 0)) for m in numel)
     body = entry.work_size({**sizes, "central": central,
-                            "regressor_dp": nv * nreg + nreg * np_ + np_ + nreg})
+                            "regressor_dp": nv * nreg + nreg * np_ + np_ + nreg}, with_p)
     return {"value": sum(numel) + 8,
             "jacobian": sum(numel) + blocks + body + 2 * central + widest + 64}
 
 
-def _rendered_entry(entry: Entry, ident: str, ins, outs, work) -> dict:
+def _rendered_entry(entry: Entry, ident: str, ins, outs) -> dict:
     def c(text):
         return None if text is None else text.format(ident=ident).strip()
 

@@ -57,16 +57,21 @@ class Entry:
     value: str
     jacobian: str | None = None
     p_jacobian: str | None = None
-    # the doubles of work the bodies take (GC_TAKE), as a function of the model's sizes
+    # the doubles of work the Jacobian's body and the p Jacobian's body take (GC_TAKE), as
+    # functions of the model's sizes
     work: object = None
+    p_work: object = None
     per_frame: bool = False
     # the Jacobian by q is along the velocity directions (nv columns), as gagen's
     # derivative kernels give it; False: the body fills q's nq columns itself
     tangent: bool = True
     doc: str = ""
 
-    def work_size(self, sizes: dict[str, int]) -> int:
-        return int(self.work(sizes)) if self.work is not None else 0
+    def work_size(self, sizes: dict[str, int], with_p: bool) -> int:
+        total = int(self.work(sizes)) if self.work is not None else 0
+        if with_p and self.p_work is not None:
+            total += int(self.p_work(sizes))
+        return total
 
 
 def _q(name: str = "q") -> Port:
@@ -97,7 +102,7 @@ FORWARD_DYNAMICS = Entry(
     if (status) return status;
     gc_matmul(NV, NV, NP, D_qdd_tau, dtau, -1.0, D_qdd_p);
     return 0;""",
-    work=lambda s: s["nv"] + s["nv"] * s["np"] + s["regressor_dp"],
+    p_work=lambda s: s["nv"] + s["nv"] * s["np"] + s["regressor_dp"],
     doc="qdd = forward_dynamics(q, qd, tau): the Jacobian from forward_dynamics_derivatives",
 )
 
@@ -111,7 +116,7 @@ INVERSE_DYNAMICS = Entry(
     {ident}_mass_matrix(q, p, D_tau_qdd);
     return 0;""",
     p_jacobian="return gc_regressor_dp(q, qd, qdd, p, D_tau_p, ws);",
-    work=lambda s: s["regressor_dp"],
+    p_work=lambda s: s["regressor_dp"],
     doc="tau = inverse_dynamics(q, qd, qdd): the Jacobian from "
         "inverse_dynamics_derivatives and the mass matrix",
 )
@@ -157,7 +162,8 @@ GRAVITY = Entry(
     {ident}_inverse_dynamics_derivatives(q, gc_zeros, gc_zeros, p, D_g_q, dqd);
     return 0;""",
     p_jacobian="return gc_regressor_dp(q, gc_zeros, gc_zeros, p, D_g_p, ws);",
-    work=lambda s: s["nv"] ** 2 + s["regressor_dp"],
+    work=lambda s: s["nv"] ** 2,
+    p_work=lambda s: s["regressor_dp"],
     doc="g = gravity(q) = inverse_dynamics(q, 0, 0): the Jacobian from "
         "inverse_dynamics_derivatives",
 )
