@@ -31,19 +31,30 @@ TIGHT = 1e-12   # against gagen's own calls (relative to the outputs' scale)
 DIFFERENCES = 1e-6  # against central differences
 REPO = Path(__file__).resolve().parents[1]
 
+def random_tree():
+    """Two branches from the world, revolute and prismatic joints (a prismatic one below a
+    revolute one), a fixed joint, rotated origins and odd axes; lengths and mass centres as
+    parameters."""
+    from random_trees import random_model
+
+    return random_model(np.random.default_rng(2), 6, symbolic=True)
+
+
 # the paper's robot; a floating robot (the double pendulum's root moves freely: 7 + 2 entries
-# of q, 8 velocities); a fixed-base arm (SO-100, 6 joints)
+# of q, 8 velocities); a fixed-base arm (SO-100, 6 joints); a branching random tree with
+# prismatic joints
 MODELS = {
-    "rrr": ("rrr", False),
-    "floating": (str(SHARED_URDF / "double_pendulum.urdf"), True),
-    "arm": (str(SHARED_URDF / "so100.urdf"), False),
+    "rrr": lambda: "rrr",
+    "floating": lambda: str(SHARED_URDF / "double_pendulum.urdf"),
+    "arm": lambda: str(SHARED_URDF / "so100.urdf"),
+    "tree": random_tree,
 }
 
 
 @pytest.fixture(scope="module", params=list(MODELS))
 def model(request, cache_dir):
-    path, floating = MODELS[request.param]
-    dyn = gagen.load(path, floating_base=floating, derivatives=True)
+    dyn = gagen.load(MODELS[request.param](), floating_base=request.param == "floating",
+                     derivatives=True)
     frames = dyn.frames
     return dyn, gc.functions(dyn), gc.functions(dyn, parameters=True), frames
 
