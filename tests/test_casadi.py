@@ -16,6 +16,7 @@ import re
 import subprocess
 import sys
 import textwrap
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -48,13 +49,21 @@ MODELS = {
     "floating": lambda: str(SHARED_URDF / "double_pendulum.urdf"),
     "arm": lambda: str(SHARED_URDF / "so100.urdf"),
     "tree": random_tree,
+    # slow: the Panda (its prismatic fingers too) and ANYmal C (floating, 18 velocities)
+    "panda": lambda: str(SHARED_URDF / "panda.urdf"),
+    "anymal": lambda: str(SHARED_URDF / "anymal_c.urdf"),
 }
+SLOW = ("panda", "anymal")
 
 
-@pytest.fixture(scope="module", params=list(MODELS))
+@pytest.fixture(scope="module", params=[pytest.param(name, marks=pytest.mark.slow)
+                                        if name in SLOW else name for name in MODELS])
 def model(request, cache_dir):
-    dyn = gagen.load(MODELS[request.param](), floating_base=request.param == "floating",
-                     derivatives=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gagen.InertiaWarning)  # ANYmal's CAD round-off
+        dyn = gagen.load(MODELS[request.param](),
+                         floating_base=request.param in ("floating", "anymal"),
+                         derivatives=True)
     frames = dyn.frames
     return dyn, gc.functions(dyn), gc.functions(dyn, parameters=True), frames
 
@@ -354,6 +363,44 @@ def test_second_derivatives_are_differences_of_the_analytic_jacobian():
 
     expected = central(gradient, x0)
     close(call(H, [x0, u0])[0], 0.5 * (expected + expected.T), "hessian", 1e-6)
+
+
+HOSTILE = """
+name: "9 lives__arm */ x"
+gravity: [0, 0, -9.81]
+parameters: {m: 2.0}
+bodies:
+  - name: "link */ one"
+    parent: world
+    joint: {name: "q__1", type: revolute, axis: [0, 0, 1]}
+    mass: m
+    com: [0.1, 0.0, 0.0]
+    inertia: [0.01, 0.02, 0.03, 0, 0, 0]
+"""
+
+
+def test_a_hostile_model_name_gives_valid_casadi_names(tmp_path):
+    """A name with a comment's end, a leading digit and runs of underscores: the C names
+    are checked identifiers, CasADi's names have no double underscore, and the header
+    carries no text of the description."""
+    path = tmp_path / "hostile.yaml"
+    path.write_text(HOSTILE)
+    dyn = gagen.load(path, derivatives=True)
+    fns = gc.functions(dyn)
+    assert all("__" not in f.name() for f in fns.values())
+    close(np.ravel(call(fns["gravity"], [[0.3]])[0]), dyn.gravity([0.3]), "gravity")
+    folder = gc.library(dyn).parent
+    for source in folder.glob("*casadi*.[ch]"):
+        text = source.read_text()
+        assert "*/ x" not in text and "*/ one" not in text, source.name
+
+
+def test_parameters_and_fixed_p_exclude_each_other():
+    dyn = gagen.load("rrr")
+    with pytest.raises(ValueError, match="parameters=True or p="):
+        gc.functions(dyn, parameters=True, p={"m3": 50.0})
+    with pytest.raises(TypeError, match="compiled model"):
+        gc.functions(gagen.load("rrr", backend="lambdify"))
 
 
 # --- C: generated code, the exported library ------------------------------------------------

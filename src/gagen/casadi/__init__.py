@@ -67,6 +67,9 @@ def functions(dyn, names=None, *, frames=(), parameters: bool = False, p=None,
     """
     import casadi
 
+    if parameters and p is not None:
+        raise ValueError("give parameters=True or p=, not both: p= fixes the parameters "
+                         "that parameters=True makes an input")
     path = str(library(dyn, cache_dir=cache_dir))
     from .build import model_ident
     from .generate import function_name, prefix_of
