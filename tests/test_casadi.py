@@ -395,6 +395,19 @@ def test_a_hostile_model_name_gives_valid_casadi_names(tmp_path):
         assert "*/ x" not in text and "*/ one" not in text, source.name
 
 
+def test_loading_a_built_library_needs_no_sympy():
+    """Once built, a model's CasADi functions load from the cache without SymPy, as the
+    model does (a fresh process)."""
+    gc.functions(gagen.load("rrr", derivatives=True))
+    code = ("import sys, gagen, gagen.casadi\n"
+            "fns = gagen.casadi.functions(gagen.load('rrr'))\n"
+            "assert float(fns['gravity']([0, 0.5, 0.2])[1]) != 0\n"
+            "assert 'sympy' not in sys.modules, 'sympy imported'\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=False)
+    assert run.returncode == 0, run.stderr
+
+
 def test_parameters_and_fixed_p_exclude_each_other():
     dyn = gagen.load("rrr")
     with pytest.raises(ValueError, match="parameters=True or p="):
