@@ -40,6 +40,7 @@ FINGERS = ("panda_finger_joint1", "panda_finger_joint2")
 STATES = 256  # states per mapped call
 GOAL_JACOBIAN = 10.0  # gagen's Jacobian at least this much faster than adam's compiled one
 GOAL_SOLVE = 3.0      # and the whole IPOPT solve
+COMPILE_LIMIT = 45 * 60.0  # seconds: adam's ANYmal Jacobian is 8 MB of C
 
 
 def available() -> str | None:
@@ -63,10 +64,12 @@ def panda_arm(urdf_dir: Path, scratch: Path) -> Path:
     return fixed_joints_urdf(urdf_dir / "panda.urdf", list(FINGERS), scratch / "panda_arm.urdf")
 
 
-def compiled_function(function, folder: Path, cache: Path, link: Path | None = None):
+def compiled_function(function, folder: Path, cache: Path, link: Path | None = None,
+                      timeout: float | None = None):
     """`function` generated as C by CasADi, compiled with -O3 into a shared library (kept in
     `cache` under a hash of the C and the command, so adam's slow compiles happen once) and
-    loaded with casadi.external. `link`: a library the C calls (gagen's)."""
+    loaded with casadi.external. `link`: a library the C calls (gagen's). A compile that
+    takes longer than `timeout` seconds is stopped (subprocess.TimeoutExpired)."""
     import casadi as ca
 
     folder.mkdir(parents=True, exist_ok=True)
@@ -86,9 +89,26 @@ def compiled_function(function, folder: Path, cache: Path, link: Path | None = N
     library = cache / f"{name}-{h.hexdigest()[:16]}.so"
     if not library.exists():
         tmp = cache / f".{library.name}-{time.monotonic_ns()}"
-        subprocess.run(command + ["-o", str(tmp), "-lm"], check=True, capture_output=True)
+        _compile(command + ["-o", str(tmp), "-lm"], timeout)
         tmp.rename(library)
     return ca.external(name, str(library))
+
+
+def _compile(command: list[str], timeout: float | None) -> None:
+    """Run the compiler; past `timeout`, stop it and the processes it started."""
+    import os
+    import signal
+
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            start_new_session=True)
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        raise
+    if proc.returncode != 0:
+        raise subprocess.CalledProcessError(proc.returncode, command, out)
 
 
 def _jacobian_function(casadi, fd, name: str, kind: str = "SX"):
@@ -110,7 +130,7 @@ def _states(dyn, count: int, seed: int = 0):
 
 
 def evaluation_rows(robot: str, dyn, gagen_fd, adam_fd, scratch: Path, cache: Path,
-                    repeats: int, target: float, progress) -> list[dict]:
+                    repeats: int, target: float, progress, notes: list[str]) -> list[dict]:
     """Per-evaluation times of forward dynamics and its Jacobian (module docstring)."""
     import casadi as ca
 
@@ -140,8 +160,15 @@ def evaluation_rows(robot: str, dyn, gagen_fd, adam_fd, scratch: Path, cache: Pa
             ("Jacobian", jac_adam, "adam", "adam, C -O3"),
             ("Jacobian", jac_mx, "gagen", "gagen, MX jacobian() as C -O3")):
         start = time.perf_counter()
-        cases[(quantity, label)] = compiled_function(
-            function, scratch / "generated", cache, link=lib if who == "gagen" else None)
+        try:
+            cases[(quantity, label)] = compiled_function(
+                function, scratch / "generated", cache, link=lib if who == "gagen" else None,
+                timeout=COMPILE_LIMIT)
+        except subprocess.TimeoutExpired:
+            notes.append(f"{robot}: {label} {quantity}: the C compiler did not finish within "
+                         f"{COMPILE_LIMIT / 60:.0f} min on this machine; left out")
+            progress(notes[-1])
+            continue
         progress(f"{robot}: {label} {quantity} ready in {time.perf_counter() - start:.1f} s")
     candidates, checks = [], {}
     for (quantity, implementation), function in cases.items():
@@ -241,8 +268,9 @@ def casadi_section(urdf_dir: Path | None, scratch: Path, cache: Path, repeats: i
     gagen_fd = functions(dyn, ["forward_dynamics"], cache_dir=cache / "gagen")[
         "forward_dynamics"]
     adam_fd = adam.forward_dynamics(arm, dyn.coordinates, dyn.parameters["g"])
+    notes: list[str] = []
     rows = evaluation_rows("panda", dyn, gagen_fd, adam_fd, scratch / "panda", cache / "C",
-                           repeats, target, progress)
+                           repeats, target, progress, notes)
     anymal = Path(urdf_dir) / "anymal_c.urdf"
     if anymal.exists():
         progress("ANYmal C (floating): building gagen's model, derivatives and library")
@@ -255,15 +283,16 @@ def casadi_section(urdf_dir: Path | None, scratch: Path, cache: Path, repeats: i
         joints = quad.coordinates[6:]
         adam_quad = adam.forward_dynamics(anymal, joints, quad.parameters["g"], floating=True)
         rows += evaluation_rows("anymal", quad, quad_fd, adam_quad, scratch / "anymal",
-                                cache / "C", repeats, target, progress)
+                                cache / "C", repeats, target, progress, notes)
     solve, differences = solve_rows(dyn, gagen_fd, adam_fd, solve_repeats, progress)
     return {"rows": rows, "solve": solve, "optimum_difference": differences,
-            "states": STATES, "repeats": repeats, "solve_repeats": solve_repeats}
+            "states": STATES, "repeats": repeats, "solve_repeats": solve_repeats,
+            "notes": notes}
 
 
 def goal_notes(section: dict) -> list[str]:
-    """The issue's goals, met or not, from the section's numbers."""
-    notes = []
+    """The section's notes and the issue's goals, met or not, from its numbers."""
+    notes = list(section.get("notes", []))
     rows = {(r["robot"], r["quantity"], r["implementation"]): r for r in section.get("rows", [])}
     for robot in ("panda", "anymal"):
         theirs = rows.get((robot, "Jacobian", "adam, C -O3"))
