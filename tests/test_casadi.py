@@ -469,6 +469,7 @@ def test_the_exported_library_works_without_gagen(tmp_path):
     dyn = gagen.load(path, floating_base=True, derivatives=True)
     prefix = gc.build.prefix_of(gc.build.model_ident(dyn))
     assert (folder / f"{prefix}.c").is_file() and (folder / f"{prefix}.h").is_file()
+    assert main(["-q", "export", "casadi", path, "--out", str(folder / f"{prefix}.c")]) == 2
     (q, qd, tau), = states(dyn, 1, seed=11)
     frame = len(dyn.frames) - 1
     calls = {f"{prefix}_forward_dynamics": [q, qd, tau],

@@ -17,7 +17,8 @@ from gagen.app.cli import COMMANDS, _flat, main, parser
 from gagen.diagnostics import showing_progress
 
 
-@pytest.mark.parametrize("command", ["build", "info", "simulate", "inverse", "paper", "bench"])
+@pytest.mark.parametrize("command", ["build", "info", "simulate", "inverse", "paper", "bench",
+                                     "export"])
 def test_every_command_explains_itself(command, capsys):
     with pytest.raises(SystemExit) as exit_:
         main([command, "--help"])

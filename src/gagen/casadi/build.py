@@ -203,6 +203,8 @@ def export(dyn, out: Path, portable: bool = False) -> Path:
     (created if needed; files of the same names replaced); return the library's path.
     Written in a temporary folder first: a failed build leaves `out` as it was."""
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{out} is a file, not a folder: give --out a folder")
     out.mkdir(parents=True, exist_ok=True)
     flags = cache_module.compile_flags(portable=portable)
     tmp = Path(tempfile.mkdtemp(prefix=".gagen-export-", dir=out))
