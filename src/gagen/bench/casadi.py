@@ -40,7 +40,7 @@ FINGERS = ("panda_finger_joint1", "panda_finger_joint2")
 STATES = 256  # states per mapped call
 GOAL_JACOBIAN = 10.0  # gagen's Jacobian at least this much faster than adam's compiled one
 GOAL_SOLVE = 3.0      # and the whole IPOPT solve
-COMPILE_LIMIT = 45 * 60.0  # seconds: adam's ANYmal Jacobian is 8 MB of C
+COMPILE_LIMIT = 15 * 60.0  # seconds: adam's ANYmal Jacobian is 8 MB of C
 
 
 def available() -> str | None:
