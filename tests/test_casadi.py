@@ -143,7 +143,27 @@ def reference(dyn, name: str, q, qd, u, frame=None):
     if name == "frame_velocity":
         return [dyn.frame_velocity(q, qd, frame)], {"q": None,
                                                     "qd": [dyn.frame_jacobian(q, frame)]}
+    # the centre of mass and centroidal functions, where the model's C has them
+    if name == "center_of_mass":
+        return [dyn.center_of_mass(q)], {"q": [dyn.com_jacobian(q)]}
+    if name == "com_velocity":
+        return [dyn.com_velocity(q, qd)], {"q": None, "qd": [dyn.com_jacobian(q)]}
+    if name == "centroidal_momentum":
+        return [dyn.centroidal_momentum(q, qd)], {"q": None, "qd": [dyn.centroidal_map(q)]}
+    if name in CENTROIDAL_MATRICES:
+        return [casadi_layout(np.asarray(CENTROIDAL_MATRICES[name](dyn, q, qd)))], {
+            port: None for port in ("q", "qd")}
     raise KeyError(name)
+
+
+# gagen's own calls of the centroidal functions without a derivative kernel
+CENTROIDAL_MATRICES = {
+    "com_jacobian": lambda dyn, q, qd, p=None: dyn.com_jacobian(q, p),
+    "centroidal_map": lambda dyn, q, qd, p=None: dyn.centroidal_map(q, p),
+    "centroidal_map_time_variation":
+        lambda dyn, q, qd, p=None: dyn.centroidal_map_time_variation(q, qd, p),
+    "centroidal_bias": lambda dyn, q, qd, p=None: dyn.centroidal_bias(q, qd, p),
+}
 
 
 def gagen_outputs(dyn, name, q, qd, u, frame, p=None):
@@ -166,6 +186,11 @@ def reference_at(dyn, name, q, qd, u, frame, p):
                                     dyn.frame_placement(q, frame, p)[1]],
         "frame_jacobian": lambda: [casadi_layout(dyn.frame_jacobian(q, frame, p))],
         "frame_velocity": lambda: [dyn.frame_velocity(q, qd, frame, p)],
+        "center_of_mass": lambda: [dyn.center_of_mass(q, p)],
+        "com_velocity": lambda: [dyn.com_velocity(q, qd, p)],
+        "centroidal_momentum": lambda: [dyn.centroidal_momentum(q, qd, p)],
+        **{key: (lambda key=key: [casadi_layout(np.asarray(
+            CENTROIDAL_MATRICES[key](dyn, q, qd, p)))]) for key in CENTROIDAL_MATRICES},
     }
     del n
     return calls[name](), None

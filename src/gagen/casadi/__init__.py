@@ -35,9 +35,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .build import export, library
+from .build import export, library, library_functions
 from .table import ENTRIES
 
+# every function of the table; a model's library holds those whose kernels its C has (the
+# centre of mass and centroidal ones where the model was built with them)
 NAMES = tuple(entry.name for entry in ENTRIES)
 FRAME_NAMES = tuple(entry.name for entry in ENTRIES if entry.per_frame)
 
@@ -45,7 +47,8 @@ FRAME_NAMES = tuple(entry.name for entry in ENTRIES if entry.per_frame)
 # dynamics) by CasADi's central differences of gagen's analytic Jacobian.
 EXTERNAL_OPTIONS = {"jacobian_options": {"enable_fd": True, "fd_method": "central"}}
 
-__all__ = ["EXTERNAL_OPTIONS", "FRAME_NAMES", "NAMES", "export", "functions", "library"]
+__all__ = ["EXTERNAL_OPTIONS", "FRAME_NAMES", "NAMES", "export", "functions", "library",
+           "library_functions"]
 
 
 def functions(dyn, names=None, *, frames=(), parameters: bool = False, p=None,
@@ -70,17 +73,18 @@ def functions(dyn, names=None, *, frames=(), parameters: bool = False, p=None,
     if parameters and p is not None:
         raise ValueError("give parameters=True or p=, not both: p= fixes the parameters "
                          "that parameters=True makes an input")
-    path = str(library(dyn, cache_dir=cache_dir))
+    built = library(dyn, cache_dir=cache_dir)
+    path, available = str(built), library_functions(built)
     from .build import model_ident
     from .generate import function_name, prefix_of
 
     prefix = prefix_of(model_ident(dyn))
     opts = {**EXTERNAL_OPTIONS, **(options or {})}
     frame_numbers = [_frame_number(dyn, frame) for frame in frames]
-    wanted = _wanted(names, dyn, frame_numbers)
+    wanted = _wanted(names, dyn, frame_numbers, available)
     fixed = None if p is None else dyn.parameter_vector(p)
     out = {}
-    for name in NAMES:
+    for name in available:
         keys = [key for key in wanted if key == name or key.startswith(name + ":")]
         if not keys:
             continue
@@ -99,10 +103,12 @@ def _frame_number(dyn, frame) -> int:
     return frame_index(dyn.info, frame)
 
 
-def _wanted(names, dyn, frame_numbers: list[int]) -> list[str]:
-    """The keys asked for, in the table's order, checked."""
+def _wanted(names, dyn, frame_numbers: list[int], available: list[str]) -> list[str]:
+    """The keys asked for, in the table's order, checked against the library's functions."""
     frame_names = [dyn.frames[k] for k in frame_numbers]
-    every = list(NAMES) + [f"{kind}:{frame}" for frame in frame_names for kind in FRAME_NAMES]
+    per_frame = [kind for kind in FRAME_NAMES if kind in available]
+    every = list(available) + [f"{kind}:{frame}" for frame in frame_names
+                               for kind in per_frame]
     if names is None:
         return every
     if isinstance(names, str):
@@ -110,11 +116,11 @@ def _wanted(names, dyn, frame_numbers: list[int]) -> list[str]:
     keys = []
     for key in names:
         kind, _, frame = str(key).partition(":")
-        if kind not in NAMES or (frame and (kind not in FRAME_NAMES
-                                             or frame not in dyn.info.frame_indices)):
-            raise ValueError(f"unknown CasADi function '{key}' (expected one of "
-                             f"{', '.join(NAMES)}, or '<frame function>:<frame>' for a frame "
-                             "of dyn.frames)")
+        if kind not in available or (frame and (kind not in per_frame
+                                                 or frame not in dyn.info.frame_indices)):
+            raise ValueError(f"unknown CasADi function '{key}' (this model's: "
+                             f"{', '.join(available)}, or '<frame function>:<frame>' for a "
+                             "frame of dyn.frames)")
         keys.append(str(key))
     return list(dict.fromkeys(keys))
 

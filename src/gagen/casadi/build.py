@@ -24,7 +24,7 @@ import numpy as np
 from .. import __version__
 from ..building import cache as cache_module
 from ..errors import BuildError
-from .generate import generate_casadi, prefix_of
+from .generate import declared_kernels, generate_casadi, prefix_of
 
 # the main module's and the derivative module's C files that hold their Python entry points
 # (the library has none)
@@ -98,8 +98,11 @@ def write_sources(dyn, folder: Path) -> list[str]:
     files: dict[str, bytes] = {}
     _collect(_sources_of(dyn, main, folder), main.KEY, files)
     _collect(Path(deriv.__file__).parent, deriv.KEY, files)
+    headers = [files[name].decode() for name in (f"{ident}.h", f"{ident}_derivatives.h")
+               if name in files]
     generated = generate_casadi(dyn.info, ident, len(dyn.regressor_names),
-                                inertial_parameters(dyn))
+                                inertial_parameters(dyn),
+                                kernels=declared_kernels(ident, headers))
     for name, text in generated.items():
         files[name] = text.encode()
     for name, data in files.items():
@@ -162,6 +165,16 @@ def compile_library(folder: Path, sources: list[str], name: str, flags: list[str
     if not path.is_file():
         raise BuildError(f"the compiler reported success but {path} is missing")
     return path
+
+
+def library_functions(path: Path) -> list[str]:
+    """The table's functions that a built library holds, from its header (next to it)."""
+    from .table import ENTRIES
+
+    prefix = path.name[3:].split(".")[0]
+    text = (path.parent / f"{prefix}.h").read_text()
+    declared = set(re.findall(r"GAGEN_CASADI_DECLARE\((\w+)\)", text))
+    return [e.name for e in ENTRIES if f"{prefix}_{e.name}" in declared]
 
 
 def library(dyn, cache_dir: Path | None = None, portable: bool = False) -> Path:

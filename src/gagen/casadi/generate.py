@@ -133,13 +133,23 @@ def _environment() -> jinja2.Environment:
         keep_trailing_newline=True, autoescape=False)
 
 
+def declared_kernels(ident: str, headers: list[str]) -> set[str]:
+    """The kernels (`<ident>_<name>(...)`) that a model's C headers declare: their names."""
+    pattern = re.compile(rf"\b{re.escape(ident)}_([A-Za-z0-9_]+)\s*\(")
+    return {match.group(1) for text in headers for match in pattern.finditer(text)}
+
+
 def generate_casadi(info: ModelInfo, ident: str, nreg: int, inertial: list[bool],
-                    entries: tuple[Entry, ...] = ENTRIES) -> dict[str, str]:
+                    entries: tuple[Entry, ...] = ENTRIES,
+                    kernels: set[str] | None = None) -> dict[str, str]:
     """The wrapper's C file and header, {file name: text}, for a model with manifest `info`
     whose kernels are named `<ident>_...` and whose regressor has `nreg` columns;
     `inertial[k]`: whether the regressor is independent of parameter k (its column of
-    dtau/dp is then Y dpi/dp)."""
+    dtau/dp is then Y dpi/dp). With `kernels` (`declared_kernels`), the entries that need
+    a kernel the model's C lacks are left out."""
     prefix = prefix_of(ident)
+    if kernels is not None:
+        entries = tuple(e for e in entries if set(e.requires) <= kernels)
     defaults = [value for _, value in info.parameters]
     nq, nv, np_ = info.nq, info.dof, len(defaults)
     if len(inertial) != np_:

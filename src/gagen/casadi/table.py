@@ -65,6 +65,9 @@ class Entry:
     # the Jacobian by q is along the velocity directions (nv columns), as gagen's
     # derivative kernels give it; False: the body fills q's nq columns itself
     tangent: bool = True
+    # the model's kernels (<ident>_<name>) the bodies call: an entry whose kernels a model's
+    # C does not declare is left out of its library
+    requires: tuple[str, ...] = ()
     doc: str = ""
 
     def work_size(self, sizes: dict[str, int], with_p: bool) -> int:
@@ -103,6 +106,8 @@ FORWARD_DYNAMICS = Entry(
     gc_matmul(NV, NV, NP, D_qdd_tau, dtau, -1.0, D_qdd_p);
     return 0;""",
     p_work=lambda s: s["nv"] + s["nv"] * s["np"] + s["regressor_dp"],
+    requires=("forward_dynamics", "forward_dynamics_derivatives", "regressor",
+              "regressor_parameters"),
     doc="qdd = forward_dynamics(q, qd, tau): the Jacobian from forward_dynamics_derivatives",
 )
 
@@ -117,6 +122,8 @@ INVERSE_DYNAMICS = Entry(
     return 0;""",
     p_jacobian="return gc_regressor_dp(q, qd, qdd, p, D_tau_p, ws);",
     p_work=lambda s: s["regressor_dp"],
+    requires=("inverse_dynamics", "inverse_dynamics_derivatives", "mass_matrix",
+              "regressor", "regressor_parameters"),
     doc="tau = inverse_dynamics(q, qd, qdd): the Jacobian from "
         "inverse_dynamics_derivatives and the mass matrix",
 )
@@ -147,6 +154,7 @@ MASS_MATRIX = Entry(
     }}
     return 0;""",
     work=lambda s: 3 * s["nv"] ** 2 + s["nv"],
+    requires=("mass_matrix", "inverse_dynamics_derivatives"),
     doc="M = mass_matrix(q): the Jacobian from inverse_dynamics_derivatives at qd = 0, "
         "qdd = e_j",
 )
@@ -164,6 +172,8 @@ GRAVITY = Entry(
     p_jacobian="return gc_regressor_dp(q, gc_zeros, gc_zeros, p, D_g_p, ws);",
     work=lambda s: s["nv"] ** 2,
     p_work=lambda s: s["regressor_dp"],
+    requires=("gravity", "inverse_dynamics_derivatives", "regressor",
+              "regressor_parameters"),
     doc="g = gravity(q) = inverse_dynamics(q, 0, 0): the Jacobian from "
         "inverse_dynamics_derivatives",
 )
@@ -194,6 +204,7 @@ CORIOLIS_MATRIX = Entry(
     return status;""",
     work=lambda s: s["nv"] + s["nv"] ** 2 + s["central"],
     tangent=False,
+    requires=("coriolis_matrix",),
     doc="C = coriolis_matrix(q, qd): dC/dqd exact (C is linear in qd), dC/dq by central "
         "differences of the compiled C",
 )
@@ -226,6 +237,7 @@ FRAME_PLACEMENT = Entry(
     return 0;""",
     work=lambda s: 6 * s["nv"],
     per_frame=True,
+    requires=("frame_placement", "frame_jacobian"),
     doc="(R, pos) = frame_placement(q, frame): the Jacobian from the frame Jacobian",
 )
 
@@ -240,6 +252,7 @@ FRAME_JACOBIAN = Entry(
     gc_jacobian_derivative(frame, J, D_J_q);
     return 0;""",
     per_frame=True,
+    requires=("frame_jacobian",),
     doc="J = frame_jacobian(q, frame) (LOCAL_WORLD_ALIGNED): dJ/dq from J's own columns "
         "(each joint's twist moves the columns above it rigidly and the frame's point for "
         "those below)",
@@ -266,9 +279,94 @@ FRAME_VELOCITY = Entry(
     return 0;""",
     work=lambda s: 6 * s["nv"] ** 2,
     per_frame=True,
+    requires=("frame_velocity", "frame_jacobian"),
     doc="v = frame_velocity(q, qd, frame) = J qd: dv/dqd = J, dv/dq = (dJ/dq) qd",
+)
+
+# --- the centre of mass and centroidal dynamics (where the model's C has them) -------------
+
+def _central_by_q(output: str) -> str:
+    """C: central differences of the entry's value by q's nq entries into D_<output>_q."""
+    return f"""
+    {{{{
+        double *blocks[1] = {{{{D_{output}_q}}}};
+        return gc_central(GC_SELF, frame, in, 0, blocks, ws);
+    }}}}"""
+
+
+CENTER_OF_MASS = Entry(
+    name="center_of_mass",
+    inputs=(_q(),),
+    outputs=(Port("com", 3),),
+    value="{ident}_center_of_mass(q, p, com);\n    return 0;",
+    jacobian="{ident}_com_jacobian(q, p, D_com_q);\n    return 0;",
+    requires=("center_of_mass", "com_jacobian"),
+    doc="com = center_of_mass(q): the Jacobian is com_jacobian",
+)
+
+COM_VELOCITY = Entry(
+    name="com_velocity",
+    inputs=(_q(), _v("qd")),
+    outputs=(Port("vcom", 3),),
+    value="{ident}_com_velocity(q, qd, p, vcom);\n    return 0;",
+    jacobian="{ident}_com_jacobian(q, p, D_vcom_qd);" + _central_by_q("vcom"),
+    work=lambda s: s["central"],
+    tangent=False,
+    requires=("com_velocity", "com_jacobian"),
+    doc="vcom = com_velocity(q, qd) = J_com qd: by qd J_com, by q central differences",
+)
+
+COM_JACOBIAN = Entry(
+    name="com_jacobian",
+    inputs=(_q(),),
+    outputs=(Port("J", 3, "nv"),),
+    value="{ident}_com_jacobian(q, p, J);\n    return 0;",
+    requires=("com_jacobian",),
+    doc="J = com_jacobian(q): central differences",
+)
+
+CENTROIDAL_MAP = Entry(
+    name="centroidal_map",
+    inputs=(_q(),),
+    outputs=(Port("Ag", 6, "nv"),),
+    value="{ident}_centroidal_map(q, p, Ag);\n    return 0;",
+    requires=("centroidal_map",),
+    doc="Ag = centroidal_map(q): central differences",
+)
+
+CENTROIDAL_MOMENTUM = Entry(
+    name="centroidal_momentum",
+    inputs=(_q(), _v("qd")),
+    outputs=(Port("hg", 6),),
+    value="{ident}_centroidal_momentum(q, qd, p, hg);\n    return 0;",
+    jacobian="{ident}_centroidal_map(q, p, D_hg_qd);" + _central_by_q("hg"),
+    work=lambda s: s["central"],
+    tangent=False,
+    requires=("centroidal_momentum", "centroidal_map"),
+    doc="hg = centroidal_momentum(q, qd) = Ag qd: by qd Ag, by q central differences",
+)
+
+CENTROIDAL_MAP_TIME_VARIATION = Entry(
+    name="centroidal_map_time_variation",
+    inputs=(_q(), _v("qd")),
+    outputs=(Port("dAg", 6, "nv"),),
+    value="{ident}_centroidal_map_time_variation(q, qd, p, dAg);\n    return 0;",
+    requires=("centroidal_map_time_variation",),
+    doc="dAg = centroidal_map_time_variation(q, qd): central differences",
+)
+
+CENTROIDAL_BIAS = Entry(
+    name="centroidal_bias",
+    inputs=(_q(), _v("qd")),
+    outputs=(Port("b", 6),),
+    value="{ident}_centroidal_bias(q, qd, p, b);\n    return 0;",
+    requires=("centroidal_bias",),
+    doc="b = centroidal_bias(q, qd) = dAg qd: central differences",
 )
 
 # The table: the order of the dictionary gagen.casadi.functions returns.
 ENTRIES: tuple[Entry, ...] = (FORWARD_DYNAMICS, INVERSE_DYNAMICS, MASS_MATRIX, GRAVITY,
-                              CORIOLIS_MATRIX, FRAME_PLACEMENT, FRAME_JACOBIAN, FRAME_VELOCITY)
+                              CORIOLIS_MATRIX, FRAME_PLACEMENT, FRAME_JACOBIAN, FRAME_VELOCITY,
+                              CENTER_OF_MASS, COM_VELOCITY, COM_JACOBIAN, CENTROIDAL_MAP,
+                              CENTROIDAL_MOMENTUM, CENTROIDAL_MAP_TIME_VARIATION,
+                              CENTROIDAL_BIAS)
