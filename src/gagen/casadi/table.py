@@ -23,6 +23,8 @@ Conventions of the C bodies (see templates/casadi.c.j2):
   on, for which dtau/dp = Y dpi/dp); the wrapper fills every other column (the kinematic
   parameters: lengths, gravity) by central differences of the value body. Without a
   `p_jacobian` body every column of p is by central differences.
+- `GC_LWA` after a frame number passes LOCAL_WORLD_ALIGNED to the frame kernels that take
+  a reference (and nothing to those that do not).
 - `GC_TAKE(ptr, n)` takes n doubles of CasADi's work vector (the function fails, returning
   1, if the table's `work` was too small: the wrapper never writes past it); the kernels'
   status codes are returned as they are (non-zero: CasADi reports the evaluation failed).
@@ -220,7 +222,7 @@ FRAME_PLACEMENT = Entry(
     double *J;
     int a, b, k, status;
     GC_TAKE(J, 6 * NV);
-    status = {ident}_frame_jacobian(q, p, frame, J);
+    status = {ident}_frame_jacobian(q, p, frame GC_LWA, J);
     if (status) return status;
     status = {ident}_frame_placement(q, p, frame, R, pos);
     if (status) return status;
@@ -245,9 +247,9 @@ FRAME_JACOBIAN = Entry(
     name="frame_jacobian",
     inputs=(_q(),),
     outputs=(Port("J", 6, "nv"),),
-    value="return {ident}_frame_jacobian(q, p, frame, J);",
+    value="return {ident}_frame_jacobian(q, p, frame GC_LWA, J);",
     jacobian="""
-    int status = {ident}_frame_jacobian(q, p, frame, J);
+    int status = {ident}_frame_jacobian(q, p, frame GC_LWA, J);
     if (status) return status;
     gc_jacobian_derivative(frame, J, D_J_q);
     return 0;""",
@@ -262,12 +264,12 @@ FRAME_VELOCITY = Entry(
     name="frame_velocity",
     inputs=(_q(), _v("qd")),
     outputs=(Port("v", 6),),
-    value="return {ident}_frame_velocity(q, qd, p, frame, v);",
+    value="return {ident}_frame_velocity(q, qd, p, frame GC_LWA, v);",
     jacobian="""
     double *dJ;
     int r, j, k, status;
     GC_TAKE(dJ, 6 * NV * NV);
-    status = {ident}_frame_jacobian(q, p, frame, D_v_qd);
+    status = {ident}_frame_jacobian(q, p, frame GC_LWA, D_v_qd);
     if (status) return status;
     gc_jacobian_derivative(frame, D_v_qd, dJ);
     for (r = 0; r < 6; ++r)
