@@ -321,8 +321,11 @@ def load_tree(seed: int, backend: str, cache_dir: Path):
     return gagen.load(tree_with_constraints(seed), backend=backend, **options)
 
 
-@pytest.mark.parametrize("backend", ["lambdify", "compiled"])
-@pytest.mark.parametrize("seed", [1, 2])
+# the second compiled tree is built by test_stacked_inputs too; the first's build (~20 s)
+# runs with the slow tests
+@pytest.mark.parametrize("seed, backend", [
+    (1, "lambdify"), (2, "lambdify"), (2, "compiled"),
+    pytest.param(1, "compiled", marks=pytest.mark.slow)])
 def test_random_floating_trees_match_pinocchio(seed, backend, cache_dir):
     pytest.importorskip("pinocchio")
     from test_taskspace import Twin
@@ -771,17 +774,24 @@ def test_bad_arguments_are_refused_with_one_line(backend, cache_dir):
 # ------------------------------------------------------------------------ declaring them
 
 def test_constraints_are_part_of_the_cache_key(cache_dir):
+    from gagen.building import cache
+    from gagen.loading import _constraints_key
+
     first = gagen.load(URDF / "double_pendulum.urdf", cache_dir=cache_dir,
                        constraints=[gagen.Contact("link2", axes=["x"])])
     again = gagen.load(URDF / "double_pendulum.urdf", cache_dir=cache_dir,
                        constraints=[{"type": "contact", "frame": "link2", "axes": ["x"]}])
-    other = gagen.load(URDF / "double_pendulum.urdf", cache_dir=cache_dir,
-                       constraints=[gagen.Contact("link2", axes=["z"])])
     assert first.module is again.module or first.module.__name__ == again.module.__name__
-    assert first.module.KEY != other.module.KEY
+    # another axis is another input key (one build fewer: the key is what finds a module)
+    keys = [cache.input_key(URDF / "double_pendulum.urdf", _constraints_key(
+        URDF / "double_pendulum.urdf", [gagen.Contact("link2", axes=[axis])]))
+        for axis in ("x", "z")]
+    assert keys[0] != keys[1]
+    other = gagen.load(URDF / "double_pendulum.urdf", backend="lambdify",
+                       constraints=[gagen.Contact("link2", axes=["z"])])
     assert [c.axes for c in other.constraints] == [("z",)]
     assert first.constraints[0].name == "link2"
-    plain = gagen.load(URDF / "double_pendulum.urdf", cache_dir=cache_dir)
+    plain = gagen.load(URDF / "double_pendulum.urdf", backend="lambdify")
     assert plain.constraints == [] and "anchor_link2_x" not in plain.parameters
     # the anchor: the frame's placement at the neutral configuration
     assert first.parameters["anchor_link2_x"] == pytest.approx(
