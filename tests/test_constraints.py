@@ -839,3 +839,26 @@ def test_constraint_wrenches_give_the_constraint_forces(anymal):
     total = sum(anymal.frame_jacobian(q, k).T @ w for k, w in wrenches)
     J = anymal.constraint_jacobian(q, on)
     close(total, J.T @ forces, "Σ J_frameᵀ w = Jᵀ λ", rtol=1e-12)
+
+
+# ------------------------------------------------------------------------ the bench section
+
+def test_the_bench_section_reports_ratios_and_the_goal():
+    from gagen.bench.constraints import goal_notes
+    from gagen.bench.report import markdown
+
+    def row(quantity, implementation, median, ratio):
+        return {"quantity": quantity, "implementation": implementation, "call": "f(x)",
+                "median_us": median, "q1_us": median, "q3_us": median, "iqr_us": 0.0,
+                "ratio": ratio}
+    rows = [row("constrained FD", "gagen compiled", 5.0, 1.0),
+            row("constrained FD", "Pinocchio", 9.5, 1.9),
+            row("impulse", "gagen compiled", 4.0, 1.0), row("impulse", "Pinocchio", 12.0, 3.0)]
+    assert goal_notes(rows) == [
+        ("Goal: constrained forward dynamics of ANYmal C on four 3-D contacts at least 2.0x "
+         "faster than Pinocchio's constraintDynamics per call: NOT met (1.90x).")]
+    rows[1]["ratio"] = 2.2
+    assert goal_notes(rows)[0].endswith("met (2.20x).") and "NOT" not in goal_notes(rows)[0]
+    text = markdown({"constraints": {"rows": rows, "repeats": 3}})
+    assert "## Constrained dynamics per call" in text
+    assert "| constrained FD | Pinocchio | `f(x)` | 9.50 |" in text
