@@ -862,3 +862,45 @@ def test_the_bench_section_reports_ratios_and_the_goal():
     text = markdown({"constraints": {"rows": rows, "repeats": 3}})
     assert "## Constrained dynamics per call" in text
     assert "| constrained FD | Pinocchio | `f(x)` | 9.50 |" in text
+
+
+# ------------------------------------------------------------------------ the docs' examples
+
+def docs_example(name: str):
+    import importlib.util
+    import sys
+
+    path = Path(__file__).resolve().parents[1] / "docs" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # its dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_docs_fourbar_loop_stays_closed(cache_dir):
+    """docs/constraints.md: the driven four-bar's closure error stays at the integrators'
+    tolerance with Baumgarte's correction, and grows without it."""
+    example = docs_example("constraints_fourbar")
+    runs = example.run_fourbar(fourbar("compiled", cache_dir), duration=2.0, samples=201)
+    with_dopri5, with_rk4, without = runs.values()
+    for res in (with_dopri5, with_rk4):
+        assert res.stats["constraint_violation"] < 2e-9
+        assert res.q[-1, 0] - res.q[0, 0] > 2 * (2 * np.pi) * 0.9  # about two turns
+    assert without.constraint_violation[-1] > 10 * with_dopri5.stats["constraint_violation"]
+    error = without.constraint_violation
+    assert error[150:].mean() > 3 * error[50:100].mean()  # it grows
+
+
+def test_docs_anymal_push(anymal):
+    """docs/constraints.md: ANYmal standing still carries its weight on its feet, the push
+    moves the load between its left and right feet, and the feet stay where they are."""
+    example = docs_example("constraints_anymal")
+    run = example.run_push(anymal, active=("LF", "RF", "LH", "RH"), samples_per_second=40)
+    close(run.forces[0].sum(axis=0), [0.0, 0.0, run.weight], "standing still", rtol=1e-9,
+          scale=run.weight)
+    pushed = (run.t > example.PHASES[1][0]) & (run.t <= example.PHASES[1][1])
+    left, right = run.forces[pushed][:, [0, 2], 2].sum(axis=1), \
+        run.forces[pushed][:, [1, 3], 2].sum(axis=1)
+    assert (left - right).max() > 100.0  # a push along +y loads the left feet
+    assert run.violation < 1e-9
