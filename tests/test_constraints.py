@@ -904,3 +904,15 @@ def test_docs_anymal_push(anymal):
         run.forces[pushed][:, [1, 3], 2].sum(axis=1)
     assert (left - right).max() > 100.0  # a push along +y loads the left feet
     assert run.violation < 1e-9
+
+
+@pytest.mark.parametrize("count, axes, message", [
+    (65, ["x"], "65 constraints; a model has at most 64"),
+    (41, "3d", "123 constrained rows; a model has at most 120")])
+def test_the_constraints_a_model_holds_are_bounded(count, axes, message):
+    """The compiled kernels keep the rows on the stack: a description cannot make them
+    hold more than the bounds (before anything is derived)."""
+    entries = [gagen.Contact("link2", axes=axes, name=f"c{k}") for k in range(count)]
+    with pytest.raises(gagen.ModelError, match=message) as info:
+        gagen.load(URDF / "double_pendulum.urdf", backend="lambdify", constraints=entries)
+    assert "\n" not in str(info.value)
