@@ -670,7 +670,7 @@ def test_a_constrained_run_writes_its_forces_to_csv(cache_dir, tmp_path):
 
 @pytest.mark.parametrize("backend", ["lambdify", "compiled"])
 def test_dependent_rows_are_a_clear_error_or_a_damped_solve(backend, cache_dir):
-    dyn = load_tree(1, backend, cache_dir)
+    dyn = load_tree(2, backend, cache_dir)  # the tree the default run builds
     rng = np.random.default_rng(11)
     q, v, tau = random_state(dyn, rng)
     # the loop's rows are the two contacts' difference: dependent on theirs
