@@ -11,9 +11,10 @@ reach the page as anything but text):
 Meshes become binary glTF (GLB) through trimesh, with their materials. Textures are scaled
 down to what the opening view shows (`MeshLibrary.texels_per_metre`: about a texel per
 screen pixel on the surfaces they cover) and at most MAX_TEXTURE_EDGE pixels: the file
-embeds them, and a browser without a GPU spends most of its first frame decoding them and
-building their mipmaps (ANYmal C's 45 textures at 1024 x 1024: 6 s of the 18 s to its
-first frame in headless Chromium). A ghost (overlaid sweep runs) is the same robot with
+embeds them, and a browser without a GPU decodes them and builds their mipmaps on the CPU
+before the first frame (ANYmal C's 19 textures all at 1024 pixels instead: 3.40 MB instead
+of 2.79 MB, and the first frame about 0.7 s later in headless Chromium; see
+benchmarks/viewer_first_frame.py). A ghost (overlaid sweep runs) is the same robot with
 translucent materials.
 """
 
