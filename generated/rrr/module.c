@@ -94,7 +94,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "9e0549dd140a2533ead71f0b3c10fcbf6aab658edcc01821a44d90fca89b708f") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "01f7dd19a20550f5503e7c45c37dee73b41d764b6b62a0eb03c5078e235940ff") < 0) {
         Py_DECREF(module);
         return NULL;
     }
