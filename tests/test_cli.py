@@ -19,7 +19,7 @@ from gagen.diagnostics import showing_progress
 
 
 @pytest.mark.parametrize("command", ["build", "info", "simulate", "inverse", "paper", "bench",
-                                     "view"])
+                                     "view", "export"])
 def test_every_command_explains_itself(command, capsys):
     with pytest.raises(SystemExit) as exit_:
         main([command, "--help"])

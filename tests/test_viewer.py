@@ -632,11 +632,12 @@ def test_view_command_serves_until_interrupted(toy, tmp_path):
     res = gagen.SimulationResult(t, swing(dyn, t), np.zeros((5, dyn.nv)),
                                  np.zeros((5, dyn.nv)), dyn.coordinates)
     res.to_csv(tmp_path / "run.csv")
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO / "src"), *sys.path]))
+    # The child runs the interpreter and the installation this test runs with (CI installs
+    # the project, non-editable, so the source tree has no compiled runtime to import).
     process = subprocess.Popen(
         [sys.executable, "-m", "gagen", "view", str(urdf), "--run", str(tmp_path / "run.csv"),
          "--package-path", str(packages), "--no-browser", "--port", str(_free_port())],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = process.stdout.readline()
         assert line.startswith("gagen: viewer at http://127.0.0.1:"), process.stderr.read()

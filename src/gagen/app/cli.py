@@ -146,6 +146,18 @@ def _info_arguments(p: argparse.ArgumentParser) -> None:
     _add_model(p)
 
 
+def _export_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("target", choices=("casadi",),
+                   help="casadi: CasADi external functions (casadi.external, acados)")
+    _add_model(p, required=True)
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="folder for the C sources and the library (created if needed)")
+    _add_cache_dir(p)
+    p.add_argument("--portable", action="store_true",
+                   help="kernels for any CPU of this architecture (default: this CPU's "
+                   "fused multiply-add where it has it)")
+
+
 def _run_arguments(p: argparse.ArgumentParser, what: str) -> None:
     """What `simulate` and `inverse` share."""
     _add_model(p)
@@ -426,6 +438,27 @@ def _print_methods(n: int, nq: int, P: int) -> None:
           "front")
 
 
+def export_command(args: argparse.Namespace) -> int:
+    """A model's functions for another tool: the CasADi library (gagen.casadi.build.export)."""
+    from ..casadi.build import export, model_ident
+    from ..casadi.generate import function_name, prefix_of
+    from ..casadi.table import ENTRIES
+    from ..loading import load
+
+    dyn = load(args.model, strict=args.strict, floating_base=args.floating_base,
+               cache_dir=args.cache_dir, derivatives=True)
+    path = export(dyn, Path(args.out), portable=args.portable)
+    prefix = prefix_of(model_ident(dyn))
+    print(f"gagen: wrote {path} and its sources ({prefix}.c, {prefix}.h: the functions, "
+          "their inputs and outputs, the frames' numbers) into " + str(Path(args.out)))
+    names = ", ".join(function_name(prefix, entry.name) for entry in ENTRIES)
+    print(f"gagen: functions {names}; each F with jac_F (its Jacobian) and F_p (the "
+          "parameters p as a last input)")
+    print(f"gagen: load one with casadi.external(\"{function_name(prefix, 'forward_dynamics')}\", "
+          f"\"{path}\")")
+    return 0
+
+
 def simulate_command(args: argparse.Namespace) -> int:
     """Direct dynamics under a PD law (gagen.app.runs.run_simulate)."""
     from .runs import print_simulate_report, run_simulate
@@ -595,6 +628,18 @@ IDENTIFY_DESCRIPTION = (
     "expression) and identified.json (also the grouping matrix and covariance) into --out\n"
     "and prints the estimates.")
 
+EXPORT_DESCRIPTION = (
+    "Export a model's dynamics and their analytic derivatives for another tool.\n\n"
+    "  casadi: C sources that follow CasADi's C API for external functions, and the shared\n"
+    "          library compiled from them with the model's C kernels (no Python at run\n"
+    "          time): forward_dynamics, inverse_dynamics, mass_matrix, gravity,\n"
+    "          coriolis_matrix, frame_placement, frame_jacobian, frame_velocity, each F\n"
+    "          with its Jacobian jac_F and F_p (the parameters as a last input). Load them\n"
+    "          with casadi.external(NAME, LIBRARY), or link the library from C (CasADi's\n"
+    "          generated code, acados' generic external functions). <model>_casadi.h lists\n"
+    "          them, their inputs and outputs, and the frames' numbers.\n\n"
+    "Example: python -m gagen export casadi robot.urdf --out casadi_robot")
+
 COMMANDS: dict[str, Command] = {
     "build": Command(
         build_command, "derive, generate C and compile a model", _build_arguments,
@@ -602,6 +647,9 @@ COMMANDS: dict[str, Command] = {
         "extension module. Shows each stage with its time and prints the operation counts before and "
         "after CSE."),
     "info": Command(info_command, "show a model's coordinates, parameters and API", _info_arguments),
+    "export": Command(export_command,
+                      "write a model's functions for another tool: CasADi, acados",
+                      _export_arguments, EXPORT_DESCRIPTION, preformatted=True),
     "simulate": Command(simulate_command,
                         "direct dynamics under feedback: the paper's Fig. 2 and 3",
                         _simulate_arguments, SIMULATE_DESCRIPTION, preformatted=True),

@@ -3,8 +3,8 @@
 Modules: `timing` (the interleaved runner every section uses), `peers` (Pinocchio, PyDy
 and plain SymPy versions of the same robot), `percall`, `batched`, `simulation`,
 `scaling`, `coldbuild`, `pinocchio_cpp`, `floating`, `centroidal`, `taskspace`,
-`derivatives`, `report` (report.md and PNG plots) and `run` (the whole suite). Pinocchio and
-PyDy are optional (`pip install gagen[bench]`); without them their rows are skipped.
+`derivatives`, `casadi`, `report` (report.md and PNG plots) and `run` (the whole suite).
+Pinocchio and PyDy are optional (`pip install gagen[bench]`); without them their rows are skipped.
 
 This module holds only the command's description (gagen.app.cli parses the command line);
 the measurement code is imported when it runs.
@@ -52,6 +52,11 @@ Default (a few minutes on 2 cores):
                     an ANYmal C foot against Pinocchio (forwardKinematics +
                     getFrameClassicalAcceleration, computeJointJacobiansTimeVariation +
                     getFrameJacobianTimeVariation, computeMinverse + Jacobian products)
+  casadi            gagen.casadi against adam's CasADi dynamics (the Panda with fixed
+                    fingers, ANYmal C): forward dynamics and its Jacobian per evaluation
+                    inside CasADi (SX, and generated C at -O3; adam's compiles cached in
+                    the cache folder), and the docs' IPOPT swing on each (needs casadi,
+                    adam-robotics: pip install gagen[bench])
 --only SECTION ... runs the named sections alone.
 Candidates are timed interleaved (round-robin over the repeats); reported are medians,
 interquartile ranges and ratios to a baseline."""

@@ -28,7 +28,7 @@ from .common import PANDA, Progress, compiled, find_urdf_dir, machine_info, opti
 
 SECTIONS = ("percall", "batched", "simulation", "throughput", "scaling", "derivatives",
             "panda", "floating", "regressor", "centroidal",
-            "taskspace")
+            "taskspace", "casadi")
 
 
 @dataclass
@@ -51,6 +51,8 @@ class Settings:
     identify_repeats: int = 5
     identify_samples: int = 10_000
     derivatives_repeats: int = 21
+    casadi_repeats: int = 11
+    casadi_solve_repeats: int = 1
     sections: tuple[str, ...] = ("percall", "batched", "simulation", "throughput", "scaling",
                                  "derivatives")
     scaling_models: list[str] | None = None  # None: the mode's default list
@@ -66,7 +68,7 @@ class Settings:
                        panda_repeats=3, scaling_models=["chain:2"], throughput_repeats=2,
                        throughput_runs=8, throughput_panda_runs=0, throughput_dask_chunks=0,
                        regressor_repeats=3, identify_repeats=1, identify_samples=500,
-                       derivatives_repeats=3)
+                       derivatives_repeats=3, casadi_repeats=3)
         return cls()
 
 
@@ -81,6 +83,7 @@ class Bench:
         self.progress = progress or Progress()
         self.scratch = Path(tempfile.mkdtemp(prefix="gagen-bench-"))
         self.cache_dir = Path(cache_dir) if cache_dir else self.scratch / "rrr"
+        self.user_cache_dir = cache_dir
         self._rrr: dict | None = None
         self._rrr_error: str | None = None
         self.loaded: dict = {}  # scaling study's models, by name, for later sections
@@ -97,7 +100,8 @@ class Bench:
                                      "throughput": settings.throughput_repeats,
                                      "regressor": settings.regressor_repeats,
                                      "identify": settings.identify_repeats,
-                                     "derivatives": settings.derivatives_repeats}},
+                                     "derivatives": settings.derivatives_repeats,
+                                     "casadi": settings.casadi_repeats}},
             "notes": [],
         }
 
@@ -373,6 +377,25 @@ class Bench:
         return {"rows": rows, "identify": identify, "repeats": s.regressor_repeats,
                 "identify_repeats": s.identify_repeats}
 
+    def casadi(self) -> dict:
+        from .casadi import casadi_section, goal_notes
+
+        s = self.settings
+        folder = find_urdf_dir(self.urdf_dir, needed=PANDA)
+        # adam's compiled Jacobians take minutes: kept from run to run in gagen's cache (or
+        # --cache-dir), by a hash of their C
+        from ..building.cache import default_cache_dir
+
+        cache = Path(self.user_cache_dir or default_cache_dir()) / "bench-casadi"
+        section = casadi_section(folder, self.scratch / "casadi", cache, s.casadi_repeats,
+                                 s.casadi_solve_repeats, s.target_s,
+                                 progress=lambda text: self.progress("casadi", text))
+        if section.get("skipped"):
+            self._note("casadi", f"The casadi section is skipped: {section['skipped']}.")
+        for note in goal_notes(section):
+            self._note("casadi", note)
+        return section
+
     # -- the run ---------------------------------------------------------------------
 
     def save(self) -> Path:
@@ -387,7 +410,7 @@ class Bench:
                   "throughput": "throughput", "scaling": "scaling",
                   "derivatives": "derivatives", "panda": "panda", "floating": "floating",
                   "regressor": "regressor", "centroidal": "centroidal",
-                  "taskspace": "task space"}
+                  "taskspace": "task space", "casadi": "casadi"}
         try:
             if {"percall", "batched", "simulation", "throughput"} & set(self.settings.sections):
                 start = time.perf_counter()

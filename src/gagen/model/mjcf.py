@@ -251,23 +251,6 @@ def _with_joint_terms(bodies: list[Body], terms: dict[str, dict[str, float]]) ->
     return out
 
 
-def body_frames(mj, source: str = "<mjcf>") -> list[tuple[str, np.ndarray]]:
-    """Per MuJoCo body id: the gagen frame named after it (`world` for body 0) and where
-    MuJoCo's body frame sits in that frame, a translation along the body's axes. gagen's
-    frame of a body is its joint frame, at the anchor of its last hinge or slide joint
-    (`model_from_mjmodel`), so MuJoCo's body frame is at minus that anchor; a body without
-    a joint, or on a free joint, has its frame where MuJoCo has it."""
-    names = _Names(mj, source)
-    frames = [(WORLD, np.zeros(3))]
-    for b in range(1, mj.nbody):
-        first, count = int(mj.body_jntadr[b]), int(mj.body_jntnum[b])
-        anchor = np.zeros(3)
-        if count and int(mj.jnt_type[first]) != _FREE:
-            anchor = np.array(mj.jnt_pos[first + count - 1], dtype=float)
-        frames.append((names.body(b), -anchor))
-    return frames
-
-
 def joint_terms(mj, source: str = "<mjcf>") -> dict[str, dict[str, float]]:
     """Per gagen coordinate (a hinge or slide joint's name), MuJoCo's `dof_damping`,
     `dof_frictionloss` and `dof_armature` as {"damping", "friction", "armature"}."""

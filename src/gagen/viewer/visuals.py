@@ -285,11 +285,11 @@ _SHOWN_GROUPS = 3  # MuJoCo's viewer shows geom groups 0, 1, 2 by default
 
 def mjcf_visuals(path: str | Path, dyn) -> RobotVisuals:
     """The shown geoms of MuJoCo's compiled model, in gagen's frames of their bodies."""
-    from ..model.mjcf import body_frames, compile_mjcf
+    from ..model.mjcf import body_names, compile_mjcf
 
     source = str(path)
     mj = compile_mjcf(path)
-    frames = body_frames(mj, source)
+    names = ["world", *body_names(mj, source)]  # each names MuJoCo's body frame
     out = RobotVisuals(source)
     for g in range(mj.ngeom):
         if int(mj.geom_group[g]) >= _SHOWN_GROUPS:
@@ -300,12 +300,12 @@ def mjcf_visuals(path: str | Path, dyn) -> RobotVisuals:
         if shape is None or rgba[3] <= 0:
             continue
         body = int(mj.geom_bodyid[g])
-        name, offset = frames[body]
+        name = names[body]
         frame = "" if body == 0 else (link_frame(dyn, name) or "")
         R = np.zeros(9)
         _mujoco().mju_quat2Mat(R, np.asarray(mj.geom_quat[g], dtype=float))
         out.visuals.append(Visual(frame, name, R.reshape(3, 3),
-                                  np.asarray(mj.geom_pos[g], dtype=float) + offset, shape, rgba))
+                                  np.asarray(mj.geom_pos[g], dtype=float), shape, rgba))
         if len(out.visuals) > MAX_VISUALS:
             raise ModelError(source, "<geom>", f"more than {MAX_VISUALS} shown geoms")
     return out
