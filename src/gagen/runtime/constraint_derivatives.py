@@ -1,0 +1,273 @@
+"""The derivatives of the constrained forward dynamics, in NumPy, on either backend's kernels.
+
+At the solution (q̈, λ) of constrained_forward_dynamics (gagen.runtime.constraints),
+
+    ID(q, q̇, q̈) − J(q)ᵀ λ = τ            a_c(q, q̇, q̈) = −damping · λ
+
+with ID the inverse dynamics and a_c(q, q̇, a) = J(q) a + J̇ q̇ the active rows' acceleration
+(plus kd J q̇ with Baumgarte's kd). Differentiating along x = q (tangent), q̇ or τ:
+
+    M ∂q̈ − Jᵀ ∂λ = ∂τ − ∂ID + ∂(Jᵀ λ)|λ        J ∂q̈ + damping ∂λ = −∂a_c|a
+
+which the factors of M (M = L Lᵀ) and of the Delassus matrix G = J M⁻¹ Jᵀ solve:
+∂λ = (G + damping I)⁻¹ (r₂ − J M⁻¹ r₁), ∂q̈ = M⁻¹ (r₁ + Jᵀ ∂λ). ∂ID are the backend's
+inverse_dynamics_derivatives (C for compiled models).
+
+The two constraint terms, ∂a_c with a held and ∂(Jᵀ λ) with λ held, come here from the
+constrained frames' world motion subspaces: column S_j of a frame's chain (a twist at the
+world's origin, linear first) moves with coordinate k on or above j's joint as
+∂S_j/∂q_k = S_k × S_j (a floating joint's six coordinates all act on each other: its
+tangent is its body's local twist, Pinocchio's integrate), and its time derivative is
+Ṡ_j = V_j × S_j (V_j the velocity of j's body). Then, for the frame's body,
+
+    V = Σ S_j q̇_j,   A = Σ S_j a_j + Ṡ_j q̇_j,   ∂V/∂q_k = Σ_{j ⪰ k} (S_k × S_j) q̇_j,
+    ∂A/∂q_k = Σ_{j ⪰ k} (S_k × S_j) a_j + (∂V_j/∂q_k × S_j + V_j × (S_k × S_j)) q̇_j,
+    ∂A/∂q̇_k = Ṡ_k + Σ_{j ⪰ k} (S_k × S_j) q̇_j
+
+and the rows (a point's classical acceleration, a frame's spatial one, a loop's relative
+one, rotated into frame A's axes for "local") follow by the product rule, carried as
+(value, ∂/∂q, ∂/∂q̇) triples. Pinocchio's computeConstraintDynamicsDerivatives has the same
+conventions (tests/test_constraint_derivatives.py).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .constraints import active_rows
+from .frames import FLOATING, jacobian, pose
+
+# --- (value, ∂/∂q, ∂/∂q̇) triples: value (..., d), derivatives (..., nv, d) ---------------------
+
+def _cross(a, b):
+    return np.cross(a, b)
+
+
+def _dual_cross(x, y):
+    """x × y of 3-vector triples."""
+    x0, xq, xv = x
+    y0, yq, yv = y
+    return (_cross(x0, y0),
+            _cross(xq, y0[..., None, :]) + _cross(x0[..., None, :], yq),
+            _cross(xv, y0[..., None, :]) + _cross(x0[..., None, :], yv))
+
+
+def _dual_add(x, y, sign: float = 1.0):
+    return tuple(a + sign * b for a, b in zip(x, y))
+
+
+def _part(x, lo: int, hi: int):
+    return tuple(a[..., lo:hi] for a in x)
+
+
+def _join(x, y):
+    return tuple(np.concatenate([a, b], axis=-1) for a, b in zip(x, y))
+
+
+def _motion_cross(a, b):
+    """The spatial cross product a × b of twists (..., 6), linear first."""
+    al, aw, bl, bw = a[..., :3], a[..., 3:], b[..., :3], b[..., 3:]
+    return np.concatenate([np.cross(aw, bl) + np.cross(al, bw), np.cross(aw, bw)], axis=-1)
+
+
+def _dual_motion_cross(x, y):
+    lin = _dual_add(_dual_cross(_part(x, 3, 6), _part(y, 0, 3)),
+                    _dual_cross(_part(x, 0, 3), _part(y, 3, 6)))
+    return _join(lin, _dual_cross(_part(x, 3, 6), _part(y, 3, 6)))
+
+
+def _at(x, p):
+    """The twist (or spatial acceleration) triple x, given at the world's origin, at p."""
+    return _join(_dual_add(_part(x, 0, 3), _dual_cross(_part(x, 3, 6), p)), _part(x, 3, 6))
+
+
+# --- one frame's motion and its derivatives ---------------------------------------------------
+
+class FrameMotion:
+    """A frame's world quantities at (q, q̇, a) with their derivatives (module docstring):
+    S (..., nv, 6) its chain's twists at the world's origin, `order` (nv, nv) the chain's
+    j ⪰ k relation, p, V, A as triples, R (..., 3, 3) its axes."""
+
+    def __init__(self, info, X, F, k: int, nv: int, v, a):
+        R, p = pose(info, X, F, k)
+        J = jacobian(info, X, F, k, nv)  # linear rows at p, world axes
+        St = np.swapaxes(J, -1, -2).copy()
+        St[..., :3] -= np.cross(St[..., 3:], p[..., None, :])  # now at the world's origin
+        order = _chain_order(info, info.frames[k][1], nv)
+        C = _motion_cross(St[..., :, None, :], St[..., None, :, :])  # C[k, j] = S_k × S_j
+        Vb = np.einsum("ij,...i,...ic->...jc", order, v, St)  # V_j: j's body's velocity
+        Sdot = _motion_cross(Vb, St)
+        zeros6 = np.zeros(St.shape)
+        V = np.einsum("...j,...jc->...c", v, St)
+        dV_dq = np.einsum("kj,...kjc,...j->...kc", order, C, v)
+        dVb = np.einsum("ki,ij,...kic,...i->...kjc", order, order, C, v)  # ∂V_j/∂q_k
+        E = _motion_cross(dVb, St[..., None, :, :]) + _motion_cross(Vb[..., None, :, :], C)
+        A = np.einsum("...j,...jc->...c", a, St) + np.einsum("...j,...jc->...c", v, Sdot)
+        dA_dq = np.einsum("kj,...kjc,...j->...kc", order, C, a) \
+            + np.einsum("kj,...kjc,...j->...kc", order, E, v)
+        self.R, self.S, self.order, self.C = R, St, order, C
+        self.p = (p, St[..., :3] + np.cross(St[..., 3:], p[..., None, :]), zeros6[..., :3])
+        self.V = (V, dV_dq, St)
+        self.A = (A, dA_dq, dV_dq + Sdot)
+        self.w = St[..., 3:]  # ∂R/∂q_k = [w_k]× R
+
+    def classical(self):
+        """The classical acceleration of the frame's origin, world axes."""
+        Vp = _at(self.V, self.p)
+        return _dual_add(_part(_at(self.A, self.p), 0, 3),
+                         _dual_cross(_part(Vp, 3, 6), _part(Vp, 0, 3)))
+
+
+def _chain_order(info, body: int, nv: int) -> np.ndarray:
+    """order[k, j] = 1 where coordinates k and j are on the body's chain and k's joint is
+    j's or above it (a floating joint's six coordinates are each other's)."""
+    joints = []
+    while body >= 0:
+        parent, kind, column = info.bodies[body]
+        if kind:  # fixed joints (0) have no coordinate
+            joints.append(range(column, column + (6 if kind == FLOATING else 1)))
+        body = parent
+    rank = np.full(nv, -1)
+    for r, columns in enumerate(reversed(joints)):
+        rank[list(columns)] = r
+    on = rank >= 0
+    return (on[:, None] & on[None, :] & (rank[:, None] <= rank[None, :])).astype(float)
+
+
+def _rotated_t(R, w, x):
+    """Rᵀ x of a triple of 3-vectors, R a frame's axes with ∂R/∂q_k = [w_k]× R."""
+    x0, xq, xv = x
+    Rt = np.swapaxes(R, -1, -2)
+    turn = xq - np.cross(w, x0[..., None, :])
+    return (np.einsum("...ij,...j->...i", Rt, x0), np.einsum("...ij,...kj->...ki", Rt, turn),
+            np.einsum("...ij,...kj->...ki", Rt, xv))
+
+
+def _rotated_blocks(fm: FrameMotion, x):
+    """Each 3-block of a triple (..., 3h) in the frame's axes."""
+    blocks = [_rotated_t(fm.R, fm.w, _part(x, 3 * h, 3 * h + 3))
+              for h in range(x[0].shape[-1] // 3)]
+    out = blocks[0]
+    for b in blocks[1:]:
+        out = _join(out, b)
+    return out
+
+
+# --- one constraint's rows ---------------------------------------------------------------------
+
+def _rows(c, A: FrameMotion, B: FrameMotion | None, kd: float):
+    """(a_c, kd J q̇) triples of the constraint's rows (its axes)."""
+    if not c.holds_frame:
+        acc, vel = A.classical(), _part(_at(A.V, A.p), 0, 3)
+        if B is not None:
+            acc = _dual_add(acc, B.classical(), -1.0)
+            vel = _dual_add(vel, _part(_at(B.V, B.p), 0, 3), -1.0)
+    elif B is None:
+        acc, vel = _at(A.A, A.p), _at(A.V, A.p)
+    else:
+        acc = _at(_dual_add(A.A, B.A, -1.0), A.p)
+        vel = _at(_dual_add(A.V, B.V, -1.0), A.p)
+        if c.reference == "local":
+            acc = _dual_add(acc, _at(_dual_motion_cross(A.V, B.V), A.p))
+    if kd:
+        acc = _dual_add(acc, tuple(kd * x for x in vel))
+    if c.reference == "local":
+        acc = _rotated_blocks(A, acc)
+    rows = list(c.axes)
+    return tuple(x[..., rows] for x in acc)
+
+
+def _generalized_force_derivative(c, A: FrameMotion, B: FrameMotion | None, lam):
+    """∂(Jᵀ λ)/∂q with λ (..., rows) held, (..., nv, nv): the constraint's wrench W on A's
+    body (and −W on B's), τ_j = S_j · W."""
+    size = 6 if c.holds_frame else 3
+    full = np.zeros(lam.shape[:-1] + (size,))
+    full[..., list(c.axes)] = lam
+    nv = A.S.shape[-2]
+    zero = np.zeros(full.shape[:-1] + (nv, 3))
+    f = (full[..., :3], zero, zero)
+    t = (full[..., 3:], zero, zero) if size == 6 else (np.zeros_like(full[..., :3]), zero,
+                                                       zero)
+    if c.reference == "local":  # ∂(R x)/∂q_k = w_k × R x
+        f0 = np.einsum("...ij,...j->...i", A.R, f[0])
+        t0 = np.einsum("...ij,...j->...i", A.R, t[0])
+        f = (f0, np.cross(A.w, f0[..., None, :]), zero)
+        t = (t0, np.cross(A.w, t0[..., None, :]), zero)
+
+    def wrench(point):
+        return _join(f, _dual_add(_dual_cross(point, f), t))
+
+    total = _on_chain(A, wrench(A.p))
+    if B is not None:
+        total -= _on_chain(B, wrench(B.p if not c.holds_frame else A.p))
+    return total
+
+
+def _on_chain(fm: FrameMotion, W):
+    """∂(Sᵀ W)/∂q: [j, k] = (∂S_j/∂q_k) · W + S_j · ∂W/∂q_k."""
+    W0, Wq, _ = W
+    moved = np.einsum("kj,...kjc,...c->...jk", fm.order, fm.C, W0)
+    return moved + np.einsum("...jc,...kc->...jk", fm.S, Wq)
+
+
+# --- the derivatives ------------------------------------------------------------------------------
+
+def derivatives(dyn, q, qd, tau, p, mask, kd: float, damping: float):
+    """(∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂τ, ∂λ/∂q, ∂λ/∂q̇, ∂λ/∂τ) at the constrained forward dynamics'
+    solution (module docstring), λ over every declared row (zero rows for the inactive
+    constraints); stacked states give stacked outputs."""
+    from .inputs import as_states
+    from .taskspace import _mass_cholesky
+
+    info, nv = dyn.info, dyn.nv
+    (q, qd, tau), _ = as_states(dyn._sizes, q, qd, tau, names=("q", "qd", "tau"))
+    qdd, forces = dyn.constrained_forward_dynamics(q, qd, tau, active=mask,
+                                                   baumgarte=(0.0, kd), damping=damping, p=p)
+    dID_dq, dID_dv = dyn.inverse_dynamics_derivatives(q, qd, qdd, p)
+    L = _mass_cholesky(dyn.mass_matrix(q, p))
+    J = dyn.constraint_jacobian(q, mask, p)
+    X, F, _ = dyn._frame_data(q, p)
+    lead, rows = q.shape[:-1], active_rows(info, mask)
+    m = len(rows)
+    lam = forces[..., rows]
+    dF_dq = -dID_dq
+    r2_q, r2_v = [], []
+    motions: dict[int, FrameMotion] = {}
+
+    def motion(frame):
+        k = info.frame_indices[frame]
+        if k not in motions:
+            motions[k] = FrameMotion(info, X, F, k, nv, qd, qdd)
+        return motions[k]
+    start = 0
+    for c, on in zip(info.constraints, mask):
+        if not on:
+            continue
+        A = motion(c.frames[0])
+        B = motion(c.frames[1]) if c.type == "loop" else None
+        _, dq, dv = _rows(c, A, B, kd)
+        r2_q.append(-np.swapaxes(dq, -1, -2))
+        r2_v.append(-np.swapaxes(dv, -1, -2))
+        dF_dq = dF_dq + _generalized_force_derivative(c, A, B, lam[..., start: start + c.dimension])
+        start += c.dimension
+    eye = np.broadcast_to(np.eye(nv), lead + (nv, nv))
+    r1 = np.concatenate([dF_dq, -dID_dv, eye], axis=-1)
+    u = _cholesky_solve(L, r1)
+    if m:
+        r2 = np.concatenate([np.concatenate(r2_q, axis=-2), np.concatenate(r2_v, axis=-2),
+                             np.zeros(lead + (m, nv))], axis=-1)
+        Y = np.linalg.solve(L, np.swapaxes(J, -1, -2))
+        G = np.swapaxes(Y, -1, -2) @ Y + damping * np.eye(m)
+        dlam = np.linalg.solve(G, r2 - J @ u)
+        dqdd = u + _cholesky_solve(L, np.swapaxes(J, -1, -2) @ dlam)
+    else:
+        dlam, dqdd = np.zeros(lead + (0, 3 * nv)), u
+    dforces = np.zeros(lead + (info.constraint_rows, 3 * nv))
+    dforces[..., rows, :] = dlam
+    return (dqdd[..., :nv], dqdd[..., nv: 2 * nv], dqdd[..., 2 * nv:],
+            dforces[..., :nv], dforces[..., nv: 2 * nv], dforces[..., 2 * nv:])
+
+
+def _cholesky_solve(L, rhs):
+    y = np.linalg.solve(L, rhs)
+    return np.linalg.solve(np.swapaxes(L, -1, -2), y)
