@@ -321,8 +321,11 @@ def load_tree(seed: int, backend: str, cache_dir: Path):
     return gagen.load(tree_with_constraints(seed), backend=backend, **options)
 
 
-@pytest.mark.parametrize("backend", ["lambdify", "compiled"])
-@pytest.mark.parametrize("seed", [1, 2])
+# the second compiled tree is built by test_stacked_inputs too; the first's build (~20 s)
+# runs with the slow tests
+@pytest.mark.parametrize("seed, backend", [
+    (1, "lambdify"), (2, "lambdify"), (2, "compiled"),
+    pytest.param(1, "compiled", marks=pytest.mark.slow)])
 def test_random_floating_trees_match_pinocchio(seed, backend, cache_dir):
     pytest.importorskip("pinocchio")
     from test_taskspace import Twin
@@ -771,17 +774,24 @@ def test_bad_arguments_are_refused_with_one_line(backend, cache_dir):
 # ------------------------------------------------------------------------ declaring them
 
 def test_constraints_are_part_of_the_cache_key(cache_dir):
+    from gagen.building import cache
+    from gagen.loading import _constraints_key
+
     first = gagen.load(URDF / "double_pendulum.urdf", cache_dir=cache_dir,
                        constraints=[gagen.Contact("link2", axes=["x"])])
     again = gagen.load(URDF / "double_pendulum.urdf", cache_dir=cache_dir,
                        constraints=[{"type": "contact", "frame": "link2", "axes": ["x"]}])
-    other = gagen.load(URDF / "double_pendulum.urdf", cache_dir=cache_dir,
-                       constraints=[gagen.Contact("link2", axes=["z"])])
     assert first.module is again.module or first.module.__name__ == again.module.__name__
-    assert first.module.KEY != other.module.KEY
+    # another axis is another input key (one build fewer: the key is what finds a module)
+    keys = [cache.input_key(URDF / "double_pendulum.urdf", _constraints_key(
+        URDF / "double_pendulum.urdf", [gagen.Contact("link2", axes=[axis])]))
+        for axis in ("x", "z")]
+    assert keys[0] != keys[1]
+    other = gagen.load(URDF / "double_pendulum.urdf", backend="lambdify",
+                       constraints=[gagen.Contact("link2", axes=["z"])])
     assert [c.axes for c in other.constraints] == [("z",)]
     assert first.constraints[0].name == "link2"
-    plain = gagen.load(URDF / "double_pendulum.urdf", cache_dir=cache_dir)
+    plain = gagen.load(URDF / "double_pendulum.urdf", backend="lambdify")
     assert plain.constraints == [] and "anchor_link2_x" not in plain.parameters
     # the anchor: the frame's placement at the neutral configuration
     assert first.parameters["anchor_link2_x"] == pytest.approx(
@@ -829,3 +839,80 @@ def test_constraint_wrenches_give_the_constraint_forces(anymal):
     total = sum(anymal.frame_jacobian(q, k).T @ w for k, w in wrenches)
     J = anymal.constraint_jacobian(q, on)
     close(total, J.T @ forces, "Σ J_frameᵀ w = Jᵀ λ", rtol=1e-12)
+
+
+# ------------------------------------------------------------------------ the bench section
+
+def test_the_bench_section_reports_ratios_and_the_goal():
+    from gagen.bench.constraints import goal_notes
+    from gagen.bench.report import markdown
+
+    def row(quantity, implementation, median, ratio):
+        return {"quantity": quantity, "implementation": implementation, "call": "f(x)",
+                "median_us": median, "q1_us": median, "q3_us": median, "iqr_us": 0.0,
+                "ratio": ratio}
+    rows = [row("constrained FD", "gagen compiled", 5.0, 1.0),
+            row("constrained FD", "Pinocchio", 9.5, 1.9),
+            row("impulse", "gagen compiled", 4.0, 1.0), row("impulse", "Pinocchio", 12.0, 3.0)]
+    assert goal_notes(rows) == [
+        ("Goal: constrained forward dynamics of ANYmal C on four 3-D contacts at least 2.0x "
+         "faster than Pinocchio's constraintDynamics per call: NOT met (1.90x).")]
+    rows[1]["ratio"] = 2.2
+    assert goal_notes(rows)[0].endswith("met (2.20x).") and "NOT" not in goal_notes(rows)[0]
+    text = markdown({"constraints": {"rows": rows, "repeats": 3}})
+    assert "## Constrained dynamics per call" in text
+    assert "| constrained FD | Pinocchio | `f(x)` | 9.50 |" in text
+
+
+# ------------------------------------------------------------------------ the docs' examples
+
+def docs_example(name: str):
+    import importlib.util
+    import sys
+
+    path = Path(__file__).resolve().parents[1] / "docs" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # its dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_docs_fourbar_loop_stays_closed(cache_dir):
+    """docs/constraints.md: the driven four-bar's closure error stays at the integrators'
+    tolerance with Baumgarte's correction, and grows without it."""
+    example = docs_example("constraints_fourbar")
+    runs = example.run_fourbar(fourbar("compiled", cache_dir), duration=2.0, samples=201)
+    with_dopri5, with_rk4, without = runs.values()
+    for res in (with_dopri5, with_rk4):
+        assert res.stats["constraint_violation"] < 2e-9
+        assert res.q[-1, 0] - res.q[0, 0] > 2 * (2 * np.pi) * 0.9  # about two turns
+    assert without.constraint_violation[-1] > 10 * with_dopri5.stats["constraint_violation"]
+    error = without.constraint_violation
+    assert error[150:].mean() > 3 * error[50:100].mean()  # it grows
+
+
+def test_docs_anymal_push(anymal):
+    """docs/constraints.md: ANYmal standing still carries its weight on its feet, the push
+    moves the load between its left and right feet, and the feet stay where they are."""
+    example = docs_example("constraints_anymal")
+    run = example.run_push(anymal, active=("LF", "RF", "LH", "RH"), samples_per_second=40)
+    close(run.forces[0].sum(axis=0), [0.0, 0.0, run.weight], "standing still", rtol=1e-9,
+          scale=run.weight)
+    pushed = (run.t > example.PHASES[1][0]) & (run.t <= example.PHASES[1][1])
+    left, right = run.forces[pushed][:, [0, 2], 2].sum(axis=1), \
+        run.forces[pushed][:, [1, 3], 2].sum(axis=1)
+    assert (left - right).max() > 100.0  # a push along +y loads the left feet
+    assert run.violation < 1e-9
+
+
+@pytest.mark.parametrize("count, axes, message", [
+    (65, ["x"], "65 constraints; a model has at most 64"),
+    (41, "3d", "123 constrained rows; a model has at most 120")])
+def test_the_constraints_a_model_holds_are_bounded(count, axes, message):
+    """The compiled kernels keep the rows on the stack: a description cannot make them
+    hold more than the bounds (before anything is derived)."""
+    entries = [gagen.Contact("link2", axes=axes, name=f"c{k}") for k in range(count)]
+    with pytest.raises(gagen.ModelError, match=message) as info:
+        gagen.load(URDF / "double_pendulum.urdf", backend="lambdify", constraints=entries)
+    assert "\n" not in str(info.value)
