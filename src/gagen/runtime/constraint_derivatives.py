@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from .constraints import active_rows
-from .frames import FLOATING, jacobian, pose
+from .frames import FLOATING, pose
 
 # --- (value, ∂/∂q, ∂/∂q̇) triples: value (..., d), derivatives (..., nv, d) ---------------------
 
@@ -43,7 +43,11 @@ def _cross(a, b):
     """a × b over the last axis, broadcast (np.cross's axis handling costs 10x more)."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    np.subtract(a1 * b2, a2 * b1, out=out[..., 0])
+    np.subtract(a2 * b0, a0 * b2, out=out[..., 1])
+    np.subtract(a0 * b1, a1 * b0, out=out[..., 2])
+    return out
 
 
 def _dual_cross(x, y):
@@ -86,39 +90,49 @@ def _at(x, p):
 
 # --- one frame's motion and its derivatives ---------------------------------------------------
 
-class FrameMotion:
-    """A frame's world quantities at (q, q̇, a) with their derivatives (module docstring):
-    S (..., nv, 6) its chain's twists at the world's origin, `order` (nv, nv) the chain's
-    j ⪰ k relation, p, V, A as triples, R (..., 3, 3) its axes."""
+class FrameMotions:
+    """The constrained frames' world quantities at (q, q̇, a) with their derivatives
+    (module docstring), the frames on an axis of their own (f): S (..., f, nv, 6) their
+    chains' twists at the world's origin, `order` (f, nv, nv) each chain's j ⪰ k relation,
+    C[..., f, k, j] = S_k × S_j, p, V, A and `acc` (the origin's classical acceleration) as
+    triples, R (..., f, 3, 3) their axes."""
 
-    def __init__(self, info, X, F, k: int, nv: int, v, a):
-        R, p = pose(info, X, F, k)
-        J = jacobian(info, X, F, k, nv)  # linear rows at p, world axes
-        St = np.swapaxes(J, -1, -2).copy()
+    def __init__(self, J, R, p, order, v, a):
+        St = np.swapaxes(J, -1, -2).copy()  # J: linear rows at p, world axes
         St[..., :3] -= _cross(St[..., 3:], p[..., None, :])  # now at the world's origin
-        order = _chain_order(info, info.frames[k][1], nv)
-        C = _motion_cross(St[..., :, None, :], St[..., None, :, :])  # C[k, j] = S_k × S_j
-        Vb = np.einsum("ij,...i,...ic->...jc", order, v, St)  # V_j: j's body's velocity
+        C = _motion_cross(St[..., :, None, :], St[..., None, :, :])
+        Vb = np.einsum("fij,...i,...fic->...fjc", order, v, St)  # V_j: j's body's velocity
         Sdot = _motion_cross(Vb, St)
-        zeros6 = np.zeros(St.shape)
-        V = np.einsum("...j,...jc->...c", v, St)
-        dV_dq = np.einsum("kj,...kjc,...j->...kc", order, C, v)
-        dVb = np.einsum("ki,ij,...kic,...i->...kjc", order, order, C, v)  # ∂V_j/∂q_k
+        V = np.einsum("...j,...fjc->...fc", v, St)
+        T = C * (order[..., None] * v[..., None, None, :, None])  # [k, i]: (S_k × S_i) q̇_i
+        dV_dq = T.sum(axis=-2)
+        dVb = np.einsum("...fkic,fij->...fkjc", T, order)  # ∂V_j/∂q_k
         E = _motion_cross(dVb, St[..., None, :, :]) + _motion_cross(Vb[..., None, :, :], C)
-        A = np.einsum("...j,...jc->...c", a, St) + np.einsum("...j,...jc->...c", v, Sdot)
-        dA_dq = np.einsum("kj,...kjc,...j->...kc", order, C, a) \
-            + np.einsum("kj,...kjc,...j->...kc", order, E, v)
+        A = np.einsum("...j,...fjc->...fc", a, St) + np.einsum("...j,...fjc->...fc", v, Sdot)
+        dA_dq = np.einsum("...fkjc,fkj,...j->...fkc", C, order, a) \
+            + np.einsum("...fkjc,fkj,...j->...fkc", E, order, v)
         self.R, self.S, self.order, self.C = R, St, order, C
-        self.p = (p, St[..., :3] + _cross(St[..., 3:], p[..., None, :]), zeros6[..., :3])
+        self.p = (p, np.swapaxes(J[..., :3, :], -1, -2), np.zeros(St.shape[:-1] + (3,)))
         self.V = (V, dV_dq, St)
         self.A = (A, dA_dq, dV_dq + Sdot)
         self.w = St[..., 3:]  # ∂R/∂q_k = [w_k]× R
-
-    def classical(self):
-        """The classical acceleration of the frame's origin, world axes."""
         Vp = _at(self.V, self.p)
-        return _dual_add(_part(_at(self.A, self.p), 0, 3),
-                         _dual_cross(_part(Vp, 3, 6), _part(Vp, 0, 3)))
+        self.acc = _dual_add(_part(_at(self.A, self.p), 0, 3),
+                             _dual_cross(_part(Vp, 3, 6), _part(Vp, 0, 3)))
+
+    def frame(self, i: int) -> _Frame:
+        return _Frame(self, i)
+
+
+class _Frame:
+    """One frame of FrameMotions: R, w, p, V, A, acc (triples without the frames' axis)."""
+
+    def __init__(self, motions: FrameMotions, i: int):
+        def pick(x):
+            return (x[0][..., i, :], x[1][..., i, :, :], x[2][..., i, :, :])
+        self.R, self.w = motions.R[..., i, :, :], motions.w[..., i, :, :]
+        self.p, self.V, self.A = pick(motions.p), pick(motions.V), pick(motions.A)
+        self.acc = pick(motions.acc)
 
 
 def _chain_order(info, body: int, nv: int) -> np.ndarray:
@@ -146,7 +160,7 @@ def _rotated_t(R, w, x):
             np.einsum("...ij,...kj->...ki", Rt, xv))
 
 
-def _rotated_blocks(fm: FrameMotion, x):
+def _rotated_blocks(fm: _Frame, x):
     """Each 3-block of a triple (..., 3h) in the frame's axes."""
     blocks = [_rotated_t(fm.R, fm.w, _part(x, 3 * h, 3 * h + 3))
               for h in range(x[0].shape[-1] // 3)]
@@ -158,12 +172,12 @@ def _rotated_blocks(fm: FrameMotion, x):
 
 # --- one constraint's rows ---------------------------------------------------------------------
 
-def _rows(c, A: FrameMotion, B: FrameMotion | None, kd: float):
-    """(a_c, kd J q̇) triples of the constraint's rows (its axes)."""
+def _rows(c, A: _Frame, B: _Frame | None, kd: float):
+    """(value, ∂/∂q, ∂/∂q̇) of the constraint's rows (its axes) of a_c (+ kd J q̇)."""
     if not c.holds_frame:
-        acc, vel = A.classical(), _part(_at(A.V, A.p), 0, 3)
+        acc, vel = A.acc, _part(_at(A.V, A.p), 0, 3)
         if B is not None:
-            acc = _dual_add(acc, B.classical(), -1.0)
+            acc = _dual_add(acc, B.acc, -1.0)
             vel = _dual_add(vel, _part(_at(B.V, B.p), 0, 3), -1.0)
     elif B is None:
         acc, vel = _at(A.A, A.p), _at(A.V, A.p)
@@ -180,37 +194,38 @@ def _rows(c, A: FrameMotion, B: FrameMotion | None, kd: float):
     return tuple(x[..., rows] for x in acc)
 
 
-def _generalized_force_derivative(c, A: FrameMotion, B: FrameMotion | None, lam):
-    """∂(Jᵀ λ)/∂q with λ (..., rows) held, (..., nv, nv): the constraint's wrench W on A's
-    body (and −W on B's), τ_j = S_j · W."""
+def _wrenches(c, A: _Frame, B: _Frame | None, lam):
+    """The constraint's wrench W at the world's origin on A's body and −W on B's, as
+    (value (..., 6), ∂/∂q (..., nv, 6)) pairs with λ (..., rows) held: Jᵀ λ = Σ Sᵀ W."""
     size = 6 if c.holds_frame else 3
     full = np.zeros(lam.shape[:-1] + (size,))
     full[..., list(c.axes)] = lam
-    nv = A.S.shape[-2]
-    zero = np.zeros(full.shape[:-1] + (nv, 3))
+    zero = np.zeros(A.w.shape)
     f = (full[..., :3], zero, zero)
-    t = (full[..., 3:], zero, zero) if size == 6 else (np.zeros_like(full[..., :3]), zero,
-                                                       zero)
+    t = (full[..., 3:], zero, zero) if size == 6 else None
     if c.reference == "local":  # ∂(R x)/∂q_k = w_k × R x
         f0 = np.einsum("...ij,...j->...i", A.R, f[0])
-        t0 = np.einsum("...ij,...j->...i", A.R, t[0])
         f = (f0, _cross(A.w, f0[..., None, :]), zero)
-        t = (t0, _cross(A.w, t0[..., None, :]), zero)
+        if t is not None:
+            t0 = np.einsum("...ij,...j->...i", A.R, t[0])
+            t = (t0, _cross(A.w, t0[..., None, :]), zero)
 
-    def wrench(point):
-        return _join(f, _dual_add(_dual_cross(point, f), t))
-
-    total = _on_chain(A, wrench(A.p))
+    def wrench(point, sign):
+        moment = _dual_cross(point, f)
+        if t is not None:
+            moment = _dual_add(moment, t)
+        W = _join(f, moment)
+        return sign * W[0], sign * W[1]
+    out = [wrench(A.p, 1.0)]
     if B is not None:
-        total -= _on_chain(B, wrench(B.p if not c.holds_frame else A.p))
-    return total
+        out.append(wrench(B.p if not c.holds_frame else A.p, -1.0))
+    return out
 
 
-def _on_chain(fm: FrameMotion, W):
-    """∂(Sᵀ W)/∂q: [j, k] = (∂S_j/∂q_k) · W + S_j · ∂W/∂q_k."""
-    W0, Wq, _ = W
-    moved = np.einsum("kj,...kjc,...c->...jk", fm.order, fm.C, W0)
-    return moved + np.einsum("...jc,...kc->...jk", fm.S, Wq)
+def _on_chains(fm: FrameMotions, W0, Wq):
+    """∂(Σ_f S_fᵀ W_f)/∂q: [j, k] = Σ_f (∂S_j/∂q_k) · W_f + S_j · ∂W_f/∂q_k."""
+    moved = np.einsum("fkj,...fkjc,...fc->...jk", fm.order, fm.C, W0)
+    return moved + np.einsum("...fjc,...fkc->...jk", fm.S, Wq)
 
 
 # --- the derivatives ------------------------------------------------------------------------------
@@ -228,37 +243,17 @@ def derivatives(dyn, q, qd, tau, p, mask, kd: float, damping: float):
                                                    baumgarte=(0.0, kd), damping=damping, p=p)
     dID_dq, dID_dv = dyn.inverse_dynamics_derivatives(q, qd, qdd, p)
     L = _mass_cholesky(dyn.mass_matrix(q, p))
-    J = dyn.constraint_jacobian(q, mask, p)
-    X, F, _ = dyn._frame_data(q, p)
     lead, rows = q.shape[:-1], active_rows(info, mask)
     m = len(rows)
-    lam = forces[..., rows]
-    dF_dq = -dID_dq
-    r2_q, r2_v = [], []
-    motions: dict[int, FrameMotion] = {}
-
-    def motion(frame):
-        k = info.frame_indices[frame]
-        if k not in motions:
-            motions[k] = FrameMotion(info, X, F, k, nv, qd, qdd)
-        return motions[k]
-    start = 0
-    for c, on in zip(info.constraints, mask):
-        if not on:
-            continue
-        A = motion(c.frames[0])
-        B = motion(c.frames[1]) if c.type == "loop" else None
-        _, dq, dv = _rows(c, A, B, kd)
-        r2_q.append(-np.swapaxes(dq, -1, -2))
-        r2_v.append(-np.swapaxes(dv, -1, -2))
-        dF_dq = dF_dq + _generalized_force_derivative(c, A, B, lam[..., start: start + c.dimension])
-        start += c.dimension
     eye = np.broadcast_to(np.eye(nv), lead + (nv, nv))
-    r1 = np.concatenate([dF_dq, -dID_dv, eye], axis=-1)
+    r1 = np.concatenate([-dID_dq, -dID_dv, eye], axis=-1)
+    if m:
+        r1[..., :nv] += _constraint_terms(dyn, q, qd, qdd, p, mask, forces[..., rows], kd,
+                                          r2 := [])
     u = _cholesky_solve(L, r1)
     if m:
-        r2 = np.concatenate([np.concatenate(r2_q, axis=-2), np.concatenate(r2_v, axis=-2),
-                             np.zeros(lead + (m, nv))], axis=-1)
+        J = dyn.constraint_jacobian(q, mask, p)
+        r2 = np.concatenate(r2, axis=-2)
         Y = np.linalg.solve(L, np.swapaxes(J, -1, -2))
         G = np.swapaxes(Y, -1, -2) @ Y + damping * np.eye(m)
         dlam = np.linalg.solve(G, r2 - J @ u)
@@ -269,6 +264,41 @@ def derivatives(dyn, q, qd, tau, p, mask, kd: float, damping: float):
     dforces[..., rows, :] = dlam
     return (dqdd[..., :nv], dqdd[..., nv: 2 * nv], dqdd[..., 2 * nv:],
             dforces[..., :nv], dforces[..., nv: 2 * nv], dforces[..., 2 * nv:])
+
+
+def _constraint_terms(dyn, q, qd, qdd, p, mask, lam, kd: float, r2: list):
+    """∂(Jᵀ λ)/∂q with λ held, (..., nv, nv); appends to r2 each active constraint's
+    (..., rows, 3 nv) block [−∂a_c/∂q, −∂a_c/∂q̇, 0] (a_c with kd J q̇)."""
+    info, nv = dyn.info, dyn.nv
+    active = [c for c, on in zip(info.constraints, mask) if on]
+    names = list(dict.fromkeys(f for c in active for f in c.frames[:2 if c.type == "loop"
+                                                                      else 1]))
+    index = {name: i for i, name in enumerate(names)}
+    X, F, _ = dyn._frame_data(q, p)
+    poses = [pose(info, X, F, info.frame_indices[name]) for name in names]
+    R = np.stack([r for r, _ in poses], axis=-3)
+    P = np.stack([x for _, x in poses], axis=-2)
+    order = np.stack([_chain_order(info, info.frames[info.frame_indices[name]][1], nv)
+                      for name in names])
+    J = dyn.frame_jacobian(q, names, p=p)
+    motions = FrameMotions(J, R, P, order, qd, qdd)
+    frames = [motions.frame(i) for i in range(len(names))]
+    W0 = np.zeros(q.shape[:-1] + (len(names), 6))
+    Wq = np.zeros(q.shape[:-1] + (len(names), nv, 6))
+    start = 0
+    for c in active:
+        A = frames[index[c.frames[0]]]
+        B = frames[index[c.frames[1]]] if c.type == "loop" else None
+        _, dq, dv = _rows(c, A, B, kd)
+        zeros = np.zeros(dq.shape)
+        r2.append(-np.swapaxes(np.concatenate([dq, dv, zeros], axis=-2), -1, -2))
+        targets = [index[c.frames[0]]] + ([index[c.frames[1]]] if B is not None else [])
+        for i, (w0, wq) in zip(targets, _wrenches(c, A, B, lam[..., start: start
+                                                                 + c.dimension])):
+            W0[..., i, :] += w0
+            Wq[..., i, :, :] += wq
+        start += c.dimension
+    return _on_chains(motions, W0, Wq)
 
 
 def _cholesky_solve(L, rhs):
