@@ -224,3 +224,33 @@ def test_bad_arguments_are_refused_with_one_line(backend, cache_dir):
     for x, y in zip(out, free):
         close(x, y, "no active constraint", rtol=1e-12)
     assert all(not x.any() for x in out[3:])
+
+
+def test_the_c_of_one_state_matches_the_numpy_path(anymal, monkeypatch):
+    """One state goes through runtime/_constraint_terms.pyx, stacked states (and a build
+    without it) through NumPy: the two agree on random sets of every kind of constraint,
+    with kd and damping."""
+    from gagen.runtime import constraint_derivatives
+
+    assert constraint_derivatives._terms is not None, "the runtime's C was not built"
+    rng = np.random.default_rng(25)
+    names = [c.name for c in anymal.constraints]
+    checked = 0
+    while checked < 12:
+        chosen = tuple(n for n in names if rng.random() < 0.25)
+        if not chosen:
+            continue
+        try:
+            q, v, tau = conditioned_state(anymal, chosen, rng, limit=1e4)
+        except AssertionError:  # dependent rows at every state tried
+            continue
+        options = {"baumgarte": (0.0, float(rng.choice([0.0, 3.0]))),
+                   "damping": float(rng.choice([0.0, 0.1]))}
+        on = mask(anymal, *chosen)
+        ours = anymal.constrained_forward_dynamics_derivatives(q, v, tau, on, **options)
+        with monkeypatch.context() as patch:
+            patch.setattr(constraint_derivatives, "_terms", None)
+            numpy = anymal.constrained_forward_dynamics_derivatives(q, v, tau, on, **options)
+        for name, x, y in zip(NAMES, ours, numpy):
+            close(x, y, f"{name} of {chosen} {options}: C against NumPy")
+        checked += 1

@@ -37,6 +37,11 @@ import numpy as np
 from .constraints import active_rows
 from .frames import FLOATING, pose
 
+try:  # the C of one state (setup.py builds it with the runtime); NumPy without it
+    from . import _constraint_terms as _terms
+except ImportError:  # pragma: no cover - a source tree without its build
+    _terms = None
+
 # --- (value, ∂/∂q, ∂/∂q̇) triples: value (..., d), derivatives (..., nv, d) ---------------------
 
 def _cross(a, b):
@@ -238,10 +243,14 @@ def derivatives(dyn, q, qd, tau, p, mask, kd: float, damping: float):
     from .taskspace import _mass_cholesky
 
     info, nv = dyn.info, dyn.nv
-    (q, qd, tau), _ = as_states(dyn._sizes, q, qd, tau, names=("q", "qd", "tau"))
+    (q, qd, tau), stacked = as_states(dyn._sizes, q, qd, tau, names=("q", "qd", "tau"))
     qdd, forces = dyn.constrained_forward_dynamics(q, qd, tau, active=mask,
                                                    baumgarte=(0.0, kd), damping=damping, p=p)
     dID_dq, dID_dv = dyn.inverse_dynamics_derivatives(q, qd, qdd, p)
+    if not stacked and _terms is not None:
+        found = _compiled(dyn, q, qd, qdd, p, mask, forces, kd, damping, dID_dq, dID_dv)
+        if found is not None:
+            return found
     L = _mass_cholesky(dyn.mass_matrix(q, p))
     lead, rows = q.shape[:-1], active_rows(info, mask)
     m = len(rows)
@@ -264,6 +273,62 @@ def derivatives(dyn, q, qd, tau, p, mask, kd: float, damping: float):
     dforces[..., rows, :] = dlam
     return (dqdd[..., :nv], dqdd[..., nv: 2 * nv], dqdd[..., 2 * nv:],
             dforces[..., :nv], dforces[..., nv: 2 * nv], dforces[..., 2 * nv:])
+
+
+def _compiled(dyn, q, qd, qdd, p, mask, forces, kd, damping, dID_dq, dID_dv):
+    """The six derivatives at one state by _constraint_terms's C (None where a factor's
+    pivot is not positive: the NumPy path then raises or answers)."""
+    info, nv = dyn.info, dyn.nv
+    names, table, order, rows = _layout(dyn, mask)
+    m = len(rows)
+    out = np.empty((nv + m, 3 * nv))
+    if names:
+        X, F, _ = dyn._frame_data(q, p)
+        poses = [pose(info, X, F, info.frame_indices[name]) for name in names]
+        R = np.ascontiguousarray(np.stack([r for r, _ in poses]))
+        P = np.ascontiguousarray(np.stack([x for _, x in poses]))
+        J = np.ascontiguousarray(dyn.frame_jacobian(q, names, p=p))
+        Jc = np.ascontiguousarray(dyn.constraint_jacobian(q, mask, p))
+    else:
+        R, P, J = np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 6, nv))
+        Jc = np.zeros((0, nv))
+    lam = np.ascontiguousarray(forces[rows])
+    status = _terms.derivatives_one(J, R, P, order, qd, qdd, table, lam, float(kd),
+                                    np.ascontiguousarray(dyn.mass_matrix(q, p)), Jc,
+                                    np.ascontiguousarray(dID_dq), np.ascontiguousarray(dID_dv),
+                                    float(damping), out)
+    if status:
+        return None
+    dforces = np.zeros((info.constraint_rows, 3 * nv))
+    dforces[rows] = out[nv:]
+    return (out[:nv, :nv].copy(), out[:nv, nv: 2 * nv].copy(), out[:nv, 2 * nv:].copy(),
+            dforces[:, :nv].copy(), dforces[:, nv: 2 * nv].copy(), dforces[:, 2 * nv:].copy())
+
+
+def _layout(dyn, mask):
+    """(frame names, the C's constraint table, the chains' order (f, nv, nv), the active
+    rows) of an active set, kept per model and set."""
+    kept = dyn.__dict__.setdefault("_constraint_derivative_layouts", {})
+    key = mask.tobytes()
+    found = kept.get(key)
+    if found is not None:
+        return found
+    info, nv = dyn.info, dyn.nv
+    active = [c for c, on in zip(info.constraints, mask) if on]
+    names = list(dict.fromkeys(f for c in active for f in c.frames[:2 if c.type == "loop"
+                                                                      else 1]))
+    index = {name: i for i, name in enumerate(names)}
+    table = np.zeros((len(active), 11), dtype=np.int32)
+    for row, c in enumerate(active):
+        table[row, :5] = (index[c.frames[0]], index[c.frames[1]] if c.type == "loop" else -1,
+                          c.holds_frame, c.reference == "local", len(c.axes))
+        table[row, 5: 5 + len(c.axes)] = c.axes
+    order = np.stack([_chain_order(info, info.frames[info.frame_indices[name]][1], nv)
+                      for name in names]) if names else np.zeros((0, nv, nv))
+    found = (names, table, np.ascontiguousarray(order), active_rows(info, mask))
+    if len(kept) < 256:
+        kept[key] = found
+    return found
 
 
 def _constraint_terms(dyn, q, qd, qdd, p, mask, lam, kd: float, r2: list):
