@@ -42,18 +42,24 @@ cdef inline void add_cross(const double *a, const double *b, double scale,
     out[2] += scale * t[2]
 
 
-def derivatives_one(double[:, :, ::1] J, double[:, :, ::1] R, double[:, ::1] P,
-                    double[:, :, ::1] order, double[::1] v, double[::1] a,
+def derivatives_one(double[:, :, ::1] J, double[::1] X, double[::1] Fo, int[::1] bodies,
+                    int[::1] frames, double[:, :, ::1] order, double[::1] v, double[::1] a,
                     int[:, ::1] table, double[::1] lam, double kd,
                     double[:, ::1] M, double[:, ::1] Jc, double[:, ::1] dID_dq,
                     double[:, ::1] dID_dv, double damping, double[:, ::1] out):
     """Fill out (nv + m, 3 nv) with [∂q̈; ∂λ] by [q | q̇ | τ] at one state; 0, or -1 where
     M or the Delassus matrix has a pivot <= 0 (the caller then takes the NumPy path).
 
-    J (f, 6, nv), R (f, 3, 3), P (f, 3): the frames' Jacobians (LOCAL_WORLD_ALIGNED) and
-    placements; order (f, nv, nv) their chains' relation; table (c, 11): per active
-    constraint [frame A, frame B or -1, holds a frame, local, axes count, axes...]."""
+    J (f, 6, nv): the frames' Jacobians (LOCAL_WORLD_ALIGNED); X, Fo: the bodies'
+    placements and the frames' offsets (gagen.runtime.frames), bodies and frames (f,): each
+    frame's body (-1: the world) and index; order (f, nv, nv) their chains' relation;
+    table (c, 11): per active constraint [frame A, frame B or -1, holds a frame, local,
+    axes count, axes...]."""
     cdef Py_ssize_t nf = J.shape[0], nv = J.shape[2], nc = table.shape[0]
+    R_ = np.empty((nf, 3, 3)); P_ = np.empty((nf, 3))
+    cdef double[:, :, ::1] R = R_
+    cdef double[:, ::1] P = P_
+    _placements(X, Fo, bodies, frames, R, P)
     cdef Py_ssize_t m = Jc.shape[0], n3 = 3 * nv
     S_ = np.zeros((nf, nv, 6)); Vb_ = np.zeros((nf, nv, 6)); Sd_ = np.zeros((nf, nv, 6))
     dVq_ = np.zeros((nf, nv, 6)); dAq_ = np.zeros((nf, nv, 6)); dAv_ = np.zeros((nf, nv, 6))
@@ -192,6 +198,29 @@ def derivatives_one(double[:, :, ::1] J, double[:, :, ::1] R, double[:, ::1] P,
                 for h in range(6):
                     dJtl[j, k] += S[f, j, h] * dW[f, k, h]
     return _kkt(M, Jc, dID_dq, dID_dv, dJtl, r2, damping, out)
+
+
+cdef void _placements(double[::1] X, double[::1] Fo, int[::1] bodies, int[::1] frames,
+                      double[:, :, ::1] R, double[:, ::1] P) noexcept:
+    """Each frame's axes R = R_b R_f and origin p_b + R_b p_f (frames.pose)."""
+    cdef Py_ssize_t f, i, j, k
+    cdef int b, fr
+    for f in range(R.shape[0]):
+        b, fr = bodies[f], frames[f]
+        for i in range(3):
+            if b < 0:
+                P[f, i] = Fo[12 * fr + 9 + i]
+            else:
+                P[f, i] = X[15 * b + 9 + i]
+                for k in range(3):
+                    P[f, i] += X[15 * b + 3 * i + k] * Fo[12 * fr + 9 + k]
+            for j in range(3):
+                if b < 0:
+                    R[f, i, j] = Fo[12 * fr + 3 * i + j]
+                else:
+                    R[f, i, j] = 0.0
+                    for k in range(3):
+                        R[f, i, j] += X[15 * b + 3 * i + k] * Fo[12 * fr + 3 * k + j]
 
 
 cdef struct Frames:

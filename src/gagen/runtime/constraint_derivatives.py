@@ -244,7 +244,8 @@ def derivatives(dyn, q, qd, tau, p, mask, kd: float, damping: float):
 
     info, nv = dyn.info, dyn.nv
     (q, qd, tau), stacked = as_states(dyn._sizes, q, qd, tau, names=("q", "qd", "tau"))
-    qdd, forces = dyn.constrained_forward_dynamics(q, qd, tau, active=mask,
+    on = tuple(bool(x) for x in mask)  # the compiled runtime keeps a tuple's checks
+    qdd, forces = dyn.constrained_forward_dynamics(q, qd, tau, active=on,
                                                    baumgarte=(0.0, kd), damping=damping, p=p)
     dID_dq, dID_dv = dyn.inverse_dynamics_derivatives(q, qd, qdd, p)
     if not stacked and _terms is not None:
@@ -279,21 +280,20 @@ def _compiled(dyn, q, qd, qdd, p, mask, forces, kd, damping, dID_dq, dID_dv):
     """The six derivatives at one state by _constraint_terms's C (None where a factor's
     pivot is not positive: the NumPy path then raises or answers)."""
     info, nv = dyn.info, dyn.nv
-    names, table, order, rows = _layout(dyn, mask)
+    names, table, order, rows, bodies, frames, active = _layout(dyn, mask)
     m = len(rows)
     out = np.empty((nv + m, 3 * nv))
     if names:
-        X, F, _ = dyn._frame_data(q, p)
-        poses = [pose(info, X, F, info.frame_indices[name]) for name in names]
-        R = np.ascontiguousarray(np.stack([r for r, _ in poses]))
-        P = np.ascontiguousarray(np.stack([x for _, x in poses]))
+        X, F = dyn._placements(q, p), dyn._frame_offsets(p)
         J = np.ascontiguousarray(dyn.frame_jacobian(q, names, p=p))
-        Jc = np.ascontiguousarray(dyn.constraint_jacobian(q, mask, p))
+        Jc = np.ascontiguousarray(dyn.constraint_jacobian(q, active, p))
     else:
-        R, P, J = np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 6, nv))
-        Jc = np.zeros((0, nv))
+        X, F = np.zeros(0), np.zeros(0)
+        J, Jc = np.zeros((0, 6, nv)), np.zeros((0, nv))
     lam = np.ascontiguousarray(forces[rows])
-    status = _terms.derivatives_one(J, R, P, order, qd, qdd, table, lam, float(kd),
+    status = _terms.derivatives_one(J, np.ascontiguousarray(X, dtype=float),
+                                    np.ascontiguousarray(F, dtype=float), bodies, frames,
+                                    order, qd, qdd, table, lam, float(kd),
                                     np.ascontiguousarray(dyn.mass_matrix(q, p)), Jc,
                                     np.ascontiguousarray(dID_dq), np.ascontiguousarray(dID_dv),
                                     float(damping), out)
@@ -325,7 +325,10 @@ def _layout(dyn, mask):
         table[row, 5: 5 + len(c.axes)] = c.axes
     order = np.stack([_chain_order(info, info.frames[info.frame_indices[name]][1], nv)
                       for name in names]) if names else np.zeros((0, nv, nv))
-    found = (names, table, np.ascontiguousarray(order), active_rows(info, mask))
+    frames = np.array([info.frame_indices[name] for name in names], dtype=np.int32)
+    bodies = np.array([info.frames[k][1] for k in frames], dtype=np.int32)
+    found = (names, table, np.ascontiguousarray(order), active_rows(info, mask), bodies,
+             frames, tuple(bool(x) for x in mask))
     if len(kept) < 256:
         kept[key] = found
     return found
