@@ -254,3 +254,20 @@ def test_the_c_of_one_state_matches_the_numpy_path(anymal, monkeypatch):
         for name, x, y in zip(NAMES, ours, numpy):
             close(x, y, f"{name} of {chosen} {options}: C against NumPy")
         checked += 1
+
+
+@pytest.mark.parametrize("backend", ["lambdify", "compiled"])
+def test_a_bad_floating_state_is_refused_with_one_line(backend, cache_dir):
+    dyn = load_tree(2, backend, cache_dir)
+    q, v, tau = random_state(dyn, np.random.default_rng(26))
+    (iq, _), = dyn.info.floating_joints()
+    zero = q.copy()
+    zero[iq + 3: iq + 7] = 0.0
+    on = ["leaf_a"]
+    with pytest.raises(ValueError, match="cannot be normalised in double precision"):
+        dyn.constrained_forward_dynamics_derivatives(zero, v, tau, on)
+    nan = v.copy()
+    nan[0] = np.nan  # as forward_dynamics: a NaN velocity gives NaN, never a crash
+    assert np.isnan(dyn.constrained_forward_dynamics_derivatives(q, nan, tau, on)[1]).any()
+    with pytest.raises(ValueError, match="q must have shape"):
+        dyn.constrained_forward_dynamics_derivatives(q[:-1], v, tau, on)

@@ -372,10 +372,9 @@ class Dynamics:
         if kp:
             raise ValueError("constrained_forward_dynamics_derivatives differentiates "
                              "baumgarte's kd only; kp must be 0")
-        mask = active_mask(self.info, active)
-        (q,), _ = as_states(self.nq, q, names=("q",))
-        check_quaternions(q, self._quaternions)
-        return derivatives(self, q, qd, tau, p, mask, kd, nonnegative(damping, "damping"))
+        # q's shape and quaternions are checked by the constrained dynamics, called first
+        return derivatives(self, q, qd, tau, p, active_mask(self.info, active), kd,
+                           nonnegative(damping, "damping"))
 
     # --- centre of mass and centroidal dynamics (gagen.runtime.centroidal) ------------------
     # Pinocchio's conventions (centerOfMass, ccrba, dccrba): 6-vectors and the rows of 6 x nv
