@@ -112,17 +112,17 @@ def derivatives_one(double[:, :, ::1] J, double[::1] X, double[::1] Fo, int[::1]
                     for h in range(6):
                         T[k, i, h] = Ckj[h] * v[i]
                         dVq[f, k, h] += T[k, i, h]
+            for h in range(6):
+                e1[h] = 0.0  # ∂V_j/∂q_k = Σ_{i ⪯ j} T[k, i]: a running sum down the chain,
+            ii = 0           # whose coordinates i ⪯ j are ch[0 .. the last one of j's joint]
             for jj in range(n):
                 j = ch[jj]
+                while ii < n and order[f, ch[ii], j] != 0.0:
+                    for h in range(6):
+                        e1[h] += T[k, ch[ii], h]
+                    ii += 1
                 if order[f, k, j] == 0.0:
                     continue
-                for h in range(6):
-                    e1[h] = 0.0  # ∂V_j/∂q_k
-                for ii in range(n):
-                    i = ch[ii]
-                    if order[f, i, j] != 0.0:
-                        for h in range(6):
-                            e1[h] += T[k, i, h]
                 mcross(&S[f, k, 0], &S[f, j, 0], Ckj)
                 mcross(e1, &S[f, j, 0], tmp)
                 mcross(&Vb[f, j, 0], Ckj, e2)
