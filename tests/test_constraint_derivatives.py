@@ -185,7 +185,9 @@ def test_fourbar_loop_matches_central_differences(backend, cache_dir):
 
 # ----------------------------------------------------------------- the API's contract
 
-@pytest.mark.parametrize("backend", ["lambdify", "compiled"])
+# the lambdify tree derives its inverse dynamics derivatives in SymPy first (14 s): slow
+@pytest.mark.parametrize("backend", [pytest.param("lambdify", marks=pytest.mark.slow),
+                                     "compiled"])
 def test_stacked_inputs_give_stacked_fresh_outputs(backend, cache_dir):
     dyn = load_tree(2, backend, cache_dir)
     rng = np.random.default_rng(24)
