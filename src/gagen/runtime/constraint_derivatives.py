@@ -1,4 +1,6 @@
-"""The derivatives of the constrained forward dynamics, in NumPy, on either backend's kernels.
+"""The derivatives of the constrained forward dynamics, on either backend's kernels: at one
+state through the C of _constraint_terms.pyx, stacked states (and a tree without that build)
+in the NumPy below, which is its reference.
 
 At the solution (q̈, λ) of constrained_forward_dynamics (gagen.runtime.constraints),
 
