@@ -54,7 +54,8 @@ Default (a few minutes on 2 cores):
                     getFrameJacobianTimeVariation, computeMinverse + Jacobian products)
   constraints       ANYmal C standing on four 3-D point contacts: the constrained forward
                     dynamics and impulse dynamics against Pinocchio's constraintDynamics
-                    and impulseDynamics (exact KKT solution, mu = 0)
+                    and impulseDynamics (exact KKT solution, mu = 0), their derivatives
+                    against computeConstraintDynamicsDerivatives
   casadi            gagen.casadi against adam's CasADi dynamics (the Panda with fixed
                     fingers, ANYmal C): forward dynamics and its Jacobian per evaluation
                     inside CasADi (SX, and generated C at -O3; adam's compiles cached in

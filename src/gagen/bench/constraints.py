@@ -18,13 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
+from . import constraint_derivatives as derivatives
 from .common import optional
 from .percall import GAGEN, rows_from
 from .timing import Candidate, interleaved
 
 ROBOT = "anymal_c.urdf"
 FEET = ("LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT")
-QUANTITIES = ("constrained FD", "impulse")
+QUANTITIES = ("constrained FD", "impulse", derivatives.QUANTITY, derivatives.PART)
 GOAL = 2.0  # Pinocchio's constraintDynamics time over gagen's
 
 
@@ -56,7 +57,7 @@ def constraints_rows(urdf_dir: Path, cache_dir: Path, repeats: int, target: floa
                    dyn.constrained_forward_dynamics, (q, qd, tau)),
         _candidate("impulse", GAGEN, "dyn.impulse_dynamics(q, qd)", dyn.impulse_dynamics,
                    (q, qd)),
-    ]
+    ] + derivatives.gagen_candidates(dyn, q, qd, tau)
     cands += _pinocchio(dyn, path, q, qd, tau)
     base = {quantity: f"{quantity} / {GAGEN}" for quantity in QUANTITIES}
     return rows_from(interleaved(cands, repeats, target, baseline=base), GAGEN)
@@ -71,7 +72,8 @@ def goal_notes(rows: list[dict]) -> list[str]:
     met = ratios[0] >= GOAL
     return [(f"Goal: constrained forward dynamics of ANYmal C on four 3-D contacts at least "
              f"{GOAL}x faster than Pinocchio's constraintDynamics per call: "
-             f"{'met' if met else 'NOT met'} ({ratios[0]:.2f}x).")]
+             f"{'met' if met else 'NOT met'} ({ratios[0]:.2f}x).")] \
+        + derivatives.goal_notes(rows)
 
 
 def standing_state(dyn, rng):
@@ -134,4 +136,5 @@ def _pinocchio(dyn, path: Path, q, qd, tau) -> list[Candidate]:
         _candidate("impulse", "Pinocchio",
                    "impulseDynamics(model, data, q, v, contacts, datas, 0, settings)",
                    impulse, (model, data, pq, pv, models, datas, settings)),
-    ]
+    ] + derivatives.pinocchio_candidate(dyn, model, data, pq, pv, ptau, models, datas,
+                                        settings, v_order, q, qd, tau)

@@ -280,7 +280,9 @@ def markdown(results: dict, images: dict | None = None) -> str:
     cs = results.get("constraints", {})
     lines += _section(
         results, "constraints", "Constrained dynamics per call: ANYmal C on four feet",
-        "`dyn.constrained_forward_dynamics(q, qd, tau)` and `dyn.impulse_dynamics(q, qd)` "
+        "`dyn.constrained_forward_dynamics(q, qd, tau)`, `dyn.impulse_dynamics(q, qd)` and "
+        "`dyn.constrained_forward_dynamics_derivatives(q, qd, tau)` (against "
+        "`constraintDynamics` + `computeConstraintDynamicsDerivatives`) "
         "with the four feet as 3-D point contacts (LOCAL_WORLD_ALIGNED) against Pinocchio's "
         "`constraintDynamics` and `impulseDynamics` on its own URDF parse (FreeFlyer; "
         "`RigidConstraintModel` CONTACT_3D per foot, `initConstraintDynamics` once, "

@@ -355,6 +355,27 @@ class Dynamics:
         check_quaternions(q, self._quaternions)
         return impulse(self, q, qd_minus, p, mask, r, nonnegative(damping, "damping"))
 
+    def constrained_forward_dynamics_derivatives(self, q, qd, tau, active=None,
+                                                 baumgarte=(0.0, 0.0), damping=0.0,
+                                                 p=None) -> tuple:
+        """(∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂τ, ∂forces/∂q, ∂forces/∂q̇, ∂forces/∂τ) of
+        constrained_forward_dynamics(q, qd, tau, active, baumgarte, damping=damping): q̈'s
+        (nv, nv) each, the forces' (rows, nv) each over every declared row (zero for the
+        inactive constraints), or stacked (N, ...); ∂/∂q in the tangent space for floating
+        bases, as forward_dynamics_derivatives. Pinocchio's computeConstraintDynamicsDerivatives
+        (the same signs: forces on frame A's body). baumgarte's kp must be 0 (kd is
+        differentiated). Raises as constrained_forward_dynamics does."""
+        from .constraint_derivatives import derivatives
+        from .constraints import active_mask, baumgarte_gains, nonnegative
+
+        kp, kd = baumgarte_gains(baumgarte)
+        if kp:
+            raise ValueError("constrained_forward_dynamics_derivatives differentiates "
+                             "baumgarte's kd only; kp must be 0")
+        # q's shape and quaternions are checked by the constrained dynamics, called first
+        return derivatives(self, q, qd, tau, p, active_mask(self.info, active), kd,
+                           nonnegative(damping, "damping"))
+
     # --- centre of mass and centroidal dynamics (gagen.runtime.centroidal) ------------------
     # Pinocchio's conventions (centerOfMass, ccrba, dccrba): 6-vectors and the rows of 6 x nv
     # matrices are linear then angular, in world axes, about the centre of mass. The compiled
