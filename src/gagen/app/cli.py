@@ -413,11 +413,19 @@ _METHODS = (
     ("centroidal_momentum(q, qd)", "h_g = A_g qd (angular: about the CoM): (6,)"),
     ("centroidal_map_time_variation(q, qd)", "d/dt A_g: (6, {n})"),
     ("centroidal_bias(q, qd)", "d/dt A_g qd: d/dt h_g = A_g qdd + this: (6,)"),
+    ("constraint_jacobian(q, active)", "J of the active constraints' rows (dyn.constraints): (rows, {n})"),
+    ("constraint_drift(q, qd, active)", "dJ/dt qd of those rows, in their conventions: (rows,)"),
+    ("constraint_error(q, active)", "their position error (Pinocchio's): (rows,)"),
+    ("constrained_forward_dynamics(q, qd, tau, ...)",
+     "(qdd, forces) of the KKT system; active=, baumgarte=, fext=: ({n},), (rows,)"),
+    ("impulse_dynamics(q, qd_minus, ...)", "(qd_plus, impulses) at an impact: ({n},), (rows,)"),
     ("inverse_dynamics_derivatives(q, qd, qdd) *", "(dtau_dq, dtau_dqd): ({n}, {n}) each"),
     ("forward_dynamics_derivatives(q, qd, tau) *",
      "(dqdd_dq, dqdd_dqd, dqdd_dtau = M^-1): ({n}, {n}) each"),
     ("coriolis_matrix(q, qd) *", "C with C qd = velocity terms: ({n}, {n})"),
     ("linearize(q, qd, tau) *", "(A, B) of x' = f(x, tau), x = (q, qd): ({m}, {m}), ({m}, {n})"),
+    ("constrained_forward_dynamics_derivatives(q, qd, tau, ...) *",
+     "dqdd and dforces by q, qd, tau: ({n}, {n}) and (rows, {n}) each"),
     ("regressor(q, qd, qdd)", "Y with tau = Y pi: ({n}, {P})"),
     ("regressor_parameters()", "pi: ({P},), names: dyn.regressor_names"),
     ("joint_terms()", "(damping, friction, armature): ({n},) each"),
@@ -431,8 +439,9 @@ def _print_methods(n: int, nq: int, P: int) -> None:
     """The API of `gagen.load(model)` with this model's array shapes (P: the regressor's
     columns)."""
     print("methods      dyn = gagen.load(MODEL); stacked (N, ...) inputs give stacked outputs")
+    width = max(len(call) for call, _ in _METHODS)
     for call, returns in _METHODS:
-        print(f"  {call:<44} {returns.format(n=n, m=2 * n, nq=nq, P=P)}")
+        print(f"  {call:<{width}} {returns.format(n=n, m=2 * n, nq=nq, P=P)}")
     print("  * compiled: a second module, built on first use; gagen.load(MODEL, "
           "derivatives=True) or\n    python -m gagen build MODEL --derivatives builds it up "
           "front")
