@@ -21,7 +21,6 @@ in π (τ = Y(q, q̇, q̈) π), so ∂τ/∂p = Y ∂π/∂p, and q̈ = M⁻¹(�
 from __future__ import annotations
 
 import jax.numpy as jnp
-import numpy as np
 
 
 def mv(A, x):
@@ -41,16 +40,7 @@ class Context:
         info = ops.dyn.info
         self.nv = ops.dyn.nv
         self.floating = info.floating_joints()
-        # q's entry of each 1-dof velocity coordinate (floating joints' handled apart)
-        entries, iq = [], 0
-        for joint in info.joints:
-            if joint.type == "floating":
-                entries += [-1] * 6
-                iq += 7
-            else:
-                entries.append(iq)
-                iq += 1
-        self.entries = np.array(entries)
+        self.joints = info.joints
 
     def call(self, name: str, *states):
         return self.ops.call(name, *states, p=self.p, frame=self.frame)
@@ -59,21 +49,27 @@ class Context:
         return jnp.zeros(like.shape[:-1] + (self.nv,), like.dtype)
 
     def velocity(self, q, dq):
-        """The velocity tangent (..., nv) of a tangent dq (..., nq) of the configuration."""
+        """The velocity tangent (..., nv) of a tangent dq (..., nq) of the configuration
+        (slices and products only: JAX transposes it)."""
         if not self.floating:
             return dq
-        plain = self.entries >= 0
-        v = jnp.zeros(jnp.broadcast_shapes(q.shape, dq.shape)[:-1] + (self.nv,), dq.dtype)
-        v = v.at[..., np.nonzero(plain)[0]].set(dq[..., self.entries[plain]])
-        for iq, iv in self.floating:
+        lead = jnp.broadcast_shapes(q.shape[:-1], dq.shape[:-1])
+        pieces, iq = [], 0
+        for joint in self.joints:
+            if joint.type != "floating":
+                pieces.append(jnp.broadcast_to(dq[..., iq: iq + 1], lead + (1,)))
+                iq += 1
+                continue
             quat = q[..., iq + 3: iq + 7]
             R, Q = rotation_and_rates(quat)
-            v = v.at[..., iv: iv + 3].set(jnp.einsum("...ji,...j->...i", R,
-                                                     dq[..., iq: iq + 3]))
             scale = 4.0 / jnp.sum(quat * quat, axis=-1, keepdims=True)
-            v = v.at[..., iv + 3: iv + 6].set(
-                scale * jnp.einsum("...ji,...j->...i", Q, dq[..., iq + 3: iq + 7]))
-        return v
+            pieces.append(jnp.broadcast_to(
+                jnp.einsum("...ji,...j->...i", R, dq[..., iq: iq + 3]), lead + (3,)))
+            pieces.append(jnp.broadcast_to(
+                scale * jnp.einsum("...ji,...j->...i", Q, dq[..., iq + 3: iq + 7]),
+                lead + (3,)))
+            iq += 7
+        return jnp.concatenate(pieces, axis=-1)
 
 
 def rotation_and_rates(quat):
@@ -165,13 +161,19 @@ def mass_matrix(ctx, x, dx, out):
 
 
 def energy(ctx, x, dx, out):
-    """(T, V): ∂T/∂q = Cᵀ q̇ (Ṁ = C + Cᵀ), ∂T/∂q̇ = M q̇, ∂V/∂q = g(q)."""
+    """(T, V) with T = ½ q̇ᵀ M q̇: ∂T/∂q̇ = M q̇, ∂V/∂q = g(q), and ∂T/∂q = Cᵀ q̇ for a
+    fixed base (Ṁ = C + Cᵀ), ½ q̇ᵀ (∂M/∂v_k) q̇ with a floating one (its velocities are
+    not the rates of q's entries, and Cᵀ q̇ is not that derivative there)."""
     q, qd = x["q"], x["qd"]
     dT = dV = None
     if dx["q"] is not None:
         v = ctx.velocity(q, dx["q"])
-        C = ctx.call("coriolis_matrix", q, qd)
-        dT = jnp.einsum("...ji,...j,...i->...", C, qd, v)
+        if ctx.floating:
+            dT = 0.5 * jnp.einsum("...jik,...i,...j,...k->...", mass_derivative(ctx, q), qd,
+                                  qd, v)
+        else:
+            C = ctx.call("coriolis_matrix", q, qd)
+            dT = jnp.einsum("...ji,...j,...i->...", C, qd, v)
         dV = jnp.einsum("...i,...i->...", ctx.call("gravity", q), v)
     if dx["qd"] is not None:
         Mqd = mv(ctx.call("mass_matrix", q), qd)
