@@ -45,7 +45,9 @@ def model(name: str):
 def functions(name: str, target: str):
     key = (name, target)
     if key not in _cache:
-        _cache[key] = gj.functions(model(name), target=target)
+        with warnings.catch_warnings():  # a first print reads the model again (warnings)
+            warnings.simplefilter("ignore", gagen.InertiaWarning)
+            _cache[key] = gj.functions(model(name), target=target)
     return _cache[key]
 
 
@@ -220,6 +222,11 @@ def _derivative_cases(dyn, f, q, qd, tau, frame):
     ]
 
 
+# the cases the other targets repeat (their rules are the same code; what differs is the
+# evaluation under them)
+SHARED_CASES = ("fd/q", "fd/tau", "id/qd", "M/q", "T/q", "pos/q")
+
+
 @pytest.mark.parametrize("target", ["ffi", "callback", "jax"])
 @pytest.mark.parametrize("name", ["rrr", "panda", "anymal"])
 def test_jacfwd_and_jacrev_equal_central_differences(name, target):
@@ -228,6 +235,8 @@ def test_jacfwd_and_jacrev_equal_central_differences(name, target):
     dyn, f = model(name), functions(name, target)
     q, qd, tau = state(dyn, 5)
     for label, fun, ref, x in _derivative_cases(dyn, f, q, qd, tau, FRAMES[name]):
+        if target != "ffi" and label not in SHARED_CASES:
+            continue
         want = central(ref, x)
         scale = max(1.0, float(np.max(np.abs(want))))
         for mode in (jax.jacfwd, jax.jacrev):
@@ -319,9 +328,9 @@ def test_parameter_derivatives_through_the_regressor(target):
     q, qd, tau = state(dyn, 8)
     names = ["m3", "I2x", "m1"]
     base = np.array([dyn.parameters[k] for k in names])
-    for method, args in (("forward_dynamics", (q, qd, tau)), ("inverse_dynamics", (q, qd, tau)),
-                         ("mass_matrix", (q,)), ("gravity", (q,)),
-                         ("forcing", (q, qd, tau))):
+    methods = (("forward_dynamics", (q, qd, tau)), ("inverse_dynamics", (q, qd, tau)),
+               ("mass_matrix", (q,)), ("gravity", (q,)), ("forcing", (q, qd, tau)))
+    for method, args in methods if target == "ffi" else methods[:2]:
         def fun(values, method=method, args=args):
             return f[method](*args, p=dict(zip(names, values)))
 

@@ -2,7 +2,7 @@
 
 Modules: `timing` (the interleaved runner every section uses), `peers` (Pinocchio, PyDy
 and plain SymPy versions of the same robot), `percall`, `batched`, `simulation`,
-`scaling`, `coldbuild`, `pinocchio_cpp`, `floating`, `derivatives`, `report` (report.md and PNG plots) and `run` (the whole suite). Pinocchio and
+`scaling`, `coldbuild`, `pinocchio_cpp`, `floating`, `derivatives`, `jaxbench`, `report` (report.md and PNG plots) and `run` (the whole suite). Pinocchio and
 PyDy are optional (`pip install gagen[bench]`); without them their rows are skipped.
 
 This module holds only the command's description (gagen.app.cli parses the command line);
@@ -44,6 +44,10 @@ Default (a few minutes on 2 cores):
   regressor         the Panda's regressor per call against Pinocchio's
                     computeJointTorqueRegressor; identification from 10,000 samples
                     (gagen.identify against Pinocchio's regressor in a loop + lstsq)
+  jax               4,096 states in jax.jit(jax.vmap(...)): forward dynamics and its
+                    jacfwd through gagen.jax's FFI and printed functions, against gagen's
+                    stacked call, adam's JAX backend and MuJoCo MJX (Panda, Panda arm,
+                    ANYmal C); the printed functions' JIT compile times
 --only SECTION ... runs the named sections alone.
 Candidates are timed interleaved (round-robin over the repeats); reported are medians,
 interquartile ranges and ratios to a baseline."""

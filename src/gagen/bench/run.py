@@ -26,7 +26,7 @@ from . import peers
 from .common import PANDA, Progress, compiled, find_urdf_dir, machine_info, optional
 
 SECTIONS = ("percall", "batched", "simulation", "throughput", "scaling", "derivatives",
-            "panda", "floating", "regressor")
+            "panda", "floating", "regressor", "jax")
 
 
 @dataclass
@@ -49,6 +49,8 @@ class Settings:
     identify_repeats: int = 5
     identify_samples: int = 10_000
     derivatives_repeats: int = 21
+    jax_repeats: int = 7
+    jax_states: int = 4096
     sections: tuple[str, ...] = ("percall", "batched", "simulation", "throughput", "scaling",
                                  "derivatives")
     scaling_models: list[str] | None = None  # None: the mode's default list
@@ -64,7 +66,7 @@ class Settings:
                        panda_repeats=3, scaling_models=["chain:2"], throughput_repeats=2,
                        throughput_runs=8, throughput_panda_runs=0, throughput_dask_chunks=0,
                        regressor_repeats=3, identify_repeats=1, identify_samples=500,
-                       derivatives_repeats=3)
+                       derivatives_repeats=3, jax_repeats=2, jax_states=64)
         return cls()
 
 
@@ -95,7 +97,8 @@ class Bench:
                                      "throughput": settings.throughput_repeats,
                                      "regressor": settings.regressor_repeats,
                                      "identify": settings.identify_repeats,
-                                     "derivatives": settings.derivatives_repeats}},
+                                     "derivatives": settings.derivatives_repeats,
+                                     "jax": settings.jax_repeats}},
             "notes": [],
         }
 
@@ -339,6 +342,17 @@ class Bench:
         return {"rows": rows, "identify": identify, "repeats": s.regressor_repeats,
                 "identify_repeats": s.identify_repeats}
 
+    def jax(self) -> dict:
+        from .jaxbench import jax_rows
+
+        s = self.settings
+        section = jax_rows(self.urdf_dir, self.scratch / "jax", s.jax_repeats, s.target_s,
+                           progress=lambda text: self.progress("jax", text),
+                           states=s.jax_states)
+        self.results["notes"].extend(section.get("notes", []))
+        section["repeats"] = s.jax_repeats
+        return section
+
     # -- the run ---------------------------------------------------------------------
 
     def save(self) -> Path:
@@ -352,7 +366,7 @@ class Bench:
         titles = {"percall": "per call", "batched": "batched", "simulation": "simulation",
                   "throughput": "throughput", "scaling": "scaling",
                   "derivatives": "derivatives", "panda": "panda", "floating": "floating",
-                  "regressor": "regressor"}
+                  "regressor": "regressor", "jax": "jax"}
         try:
             if {"percall", "batched", "simulation", "throughput"} & set(self.settings.sections):
                 start = time.perf_counter()

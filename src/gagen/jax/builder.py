@@ -263,9 +263,20 @@ class Builder:
             raise NotImplementedError(
                 f"gagen.jax: {method.name} has no derivative with respect to p on the compiled "
                 f"path (target='{self.ops.target}'); use target='jax'")
-        pi = self.parameter_program().regressor_parameters
-        dpi = jax.jvp(lambda pf: pi(pf), (p,), (dp,))[1]
+        # dπ = (∂π/∂p) dp with ∂π/∂p evaluated at p from the printed π(p) (forward mode):
+        # it depends on p alone, so in a rollout JAX's partial evaluation computes it once,
+        # outside the loop, and the reverse pass only multiplies by its transpose
+        dpi = jnp.einsum("...ij,...j->...i", self._pi_jacobian(p), dp)
         return PARAMETER_RULES[method.parameter_rule](ctx, x, out, dpi)
+
+    def _pi_jacobian(self, p):
+        """∂π/∂p at p, (..., P, np), from the printed program of π."""
+        pi = self.parameter_program().regressor_parameters
+        if p.ndim == 1:
+            return jax.jacfwd(pi)(p)
+        flat = p.reshape(-1, p.shape[-1])
+        jac = jax.vmap(jax.jacfwd(pi))(flat)
+        return jac.reshape(p.shape[:-1] + jac.shape[-2:])
 
     def parameter_program(self):
         """The printed dynamics module (π(p) and KINEMATIC), printed on first use."""

@@ -24,8 +24,21 @@ import jax.numpy as jnp
 
 
 def mv(A, x):
-    """A @ x over leading dimensions: (..., m, n) by (..., n)."""
-    return jnp.einsum("...ij,...j->...i", A, x)
+    """A @ x over leading dimensions: (..., m, n) by (..., n). For the dynamics' square
+    matrices (n up to a few dozen) as n products of columns summed: XLA fuses them into one
+    elementwise loop over the batch, where a batched dot of such small matrices costs it
+    several times more on the CPU (under jax.jacfwd's basis of tangents most of all); for
+    the regressor's long rows (P = 10 per body) a dot."""
+    if A.shape[-1] > SMALL:
+        return jnp.einsum("...ij,...j->...i", A, x)
+    total = A[..., :, 0] * x[..., 0:1]
+    for j in range(1, A.shape[-1]):
+        total = total + A[..., :, j] * x[..., j: j + 1]
+    return total
+
+
+# the widest matrix `mv` multiplies column by column
+SMALL = 48
 
 
 def add(total, term):
@@ -37,13 +50,26 @@ class Context:
 
     def __init__(self, ops, p, frame: int):
         self.ops, self.p, self.frame = ops, p, frame
+        self._calls: dict = {}  # (name, ids of the states) -> (results, the states)
         info = ops.dyn.info
         self.nv = ops.dyn.nv
         self.floating = info.floating_joints()
         self.joints = info.joints
 
     def call(self, name: str, *states):
-        return self.ops.call(name, *states, p=self.p, frame=self.frame)
+        """A method's results at this point; kept for the rule's other terms (the
+        parameters' term reuses the derivative kernel's M⁻¹)."""
+        key = (name, tuple(id(s) for s in states))
+        found = self._calls.get(key)
+        if found is None:
+            found = self._calls[key] = (self.ops.call(name, *states, p=self.p,
+                                                      frame=self.frame), states)
+        return found[0]
+
+    def called(self, name: str, *states):
+        """The results of an earlier `call` with these very arrays, or None."""
+        found = self._calls.get((name, tuple(id(s) for s in states)))
+        return None if found is None else found[0]
 
     def zeros(self, like):
         return jnp.zeros(like.shape[:-1] + (self.nv,), like.dtype)
@@ -63,11 +89,10 @@ class Context:
             quat = q[..., iq + 3: iq + 7]
             R, Q = rotation_and_rates(quat)
             scale = 4.0 / jnp.sum(quat * quat, axis=-1, keepdims=True)
+            pieces.append(jnp.broadcast_to(mv(jnp.swapaxes(R, -1, -2), dq[..., iq: iq + 3]),
+                                           lead + (3,)))
             pieces.append(jnp.broadcast_to(
-                jnp.einsum("...ji,...j->...i", R, dq[..., iq: iq + 3]), lead + (3,)))
-            pieces.append(jnp.broadcast_to(
-                scale * jnp.einsum("...ji,...j->...i", Q, dq[..., iq + 3: iq + 7]),
-                lead + (3,)))
+                scale * mv(jnp.swapaxes(Q, -1, -2), dq[..., iq + 3: iq + 7]), lead + (3,)))
             iq += 7
         return jnp.concatenate(pieces, axis=-1)
 
@@ -234,6 +259,9 @@ def _parameters_inverse_dynamics(ctx, x, out, dpi):
 def _parameters_forward_dynamics(ctx, x, out, dpi):
     q = x["q"]
     dtau = mv(ctx.call("regressor", q, x["qd"], out), dpi)
+    derivatives = ctx.called("forward_dynamics_derivatives", q, x["qd"], x["tau"])
+    if derivatives is not None:  # the state's term computed M⁻¹ already
+        return -mv(derivatives[2], dtau)
     M = ctx.call("mass_matrix", q)
     M, dtau = jnp.broadcast_arrays(M, dtau[..., None])
     return -jnp.linalg.solve(M, dtau)[..., 0]
