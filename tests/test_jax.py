@@ -412,13 +412,11 @@ def test_the_shim_refuses_a_model_it_does_not_know():
     from gagen.jax import ffi
 
     functions("rrr", "ffi")
-    shim = ffi.shim()
     call = ffi._call_for(((3,),), "float64")
     with pytest.raises(Exception, match="has not registered"):
         jax.block_until_ready(call(np.zeros(3), model=np.int64(0), key=np.int64(12345),
                                    kernel=np.int32(5), frame=np.int32(-1),
                                    has_p=np.int32(0)))
-    assert shim.calls() >= 0
 
 
 def test_a_cached_printed_module_loads_without_sympy(tmp_path):

@@ -74,15 +74,11 @@ def functions(dyn, target: str = "ffi", cache_dir=None) -> dict:
     if target == "ffi":
         from gagen.jax.ops import FFIOps
 
-        ops = FFIOps(dyn, cache_dir)
-        ops.cache_dir = cache_dir
-        builder = Builder(ops)
+        builder = Builder(FFIOps(dyn, cache_dir))
     elif target == "callback":
         from gagen.jax.ops import CallbackOps
 
-        ops = CallbackOps(dyn)
-        ops.cache_dir = cache_dir
-        builder = Builder(ops)
+        builder = Builder(CallbackOps(dyn, cache_dir))
     else:
         from gagen.jax.printed import PrintedOps
 

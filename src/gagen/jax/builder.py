@@ -283,8 +283,7 @@ class Builder:
         if self._parameter_program is None:
             from gagen.jax.printed import printed_module
 
-            self._parameter_program = printed_module(self.dyn, "dynamics",
-                                                     getattr(self.ops, "cache_dir", None))
+            self._parameter_program = printed_module(self.dyn, "dynamics", self.ops.cache_dir)
         return self._parameter_program
 
     def kinematic(self) -> tuple[int, ...]:

@@ -28,8 +28,9 @@ class Ops:
 
     target = ""
 
-    def __init__(self, dyn):
+    def __init__(self, dyn, cache_dir=None):
         self.dyn = dyn
+        self.cache_dir = cache_dir  # where the FFI shim and the printed modules are kept
         info = dyn.info
         self.sizes = {"nq": dyn.nq, "nv": dyn.nv, "np": len(dyn.parameters),
                       "nb": len(info.bodies), "nf": len(info.frames),
@@ -57,6 +58,13 @@ class Ops:
         return outputs[0] if len(outputs) == 1 else tuple(outputs)
 
 
+def _dtype(states, p):
+    """The working dtype: the states', else p's, else JAX's default float."""
+    if states:
+        return states[0].dtype
+    return p.dtype if p is not None else jnp.asarray(0.0).dtype
+
+
 class FFIOps(Ops):
     """The compiled kernels of a model's modules through gagen's FFI handler."""
 
@@ -65,7 +73,7 @@ class FFIOps(Ops):
     def __init__(self, dyn, cache_dir=None):
         from gagen.jax.ffi import shim
 
-        super().__init__(dyn)
+        super().__init__(dyn, cache_dir)
         self.shim = shim(cache_dir)
         self.ids = {name: k for k, name in enumerate(KERNELS)}
         self._tables: dict[str, tuple[int, int]] = {}
@@ -88,7 +96,7 @@ class FFIOps(Ops):
 
         method = METHODS[name]
         kernel = KERNELS[method.kernel]
-        dtype = states[0].dtype if states else (p.dtype if p is not None else jnp.float64)
+        dtype = _dtype(states, p)
         slot, key = self.table(kernel.table)
         arrays = list(states) + ([] if p is None else [p])
         lead = self.lead(arrays)
@@ -106,7 +114,7 @@ class CallbackOps(Ops):
 
     def call(self, name: str, *states, p=None, frame: int = -1):
         method = METHODS[name]
-        dtype = states[0].dtype if states else (p.dtype if p is not None else jnp.float64)
+        dtype = _dtype(states, p)
         arrays = list(states) + ([] if p is None else [p])
         lead = self.lead(arrays)
         shapes = self.shapes(method)

@@ -35,7 +35,7 @@ from gagen.building.cache import (
 from gagen.errors import BuildError
 from gagen.jax import frames as jframes
 from gagen.jax import linalg
-from gagen.jax.ops import Ops
+from gagen.jax.ops import Ops, _dtype
 from gagen.jax.registry import METHODS
 
 _lock = threading.Lock()
@@ -124,8 +124,7 @@ class PrintedOps(Ops):
     target = "jax"
 
     def __init__(self, dyn, cache_dir=None):
-        super().__init__(dyn)
-        self.cache_dir = cache_dir
+        super().__init__(dyn, cache_dir)
         self.main = printed_module(dyn, "dynamics", cache_dir)
         self.defaults = np.asarray(dyn.info.parameter_vector(), dtype=np.float64)
 
@@ -138,7 +137,7 @@ class PrintedOps(Ops):
 
     def call(self, name: str, *states, p=None, frame: int = -1):
         method = METHODS[name]
-        dtype = states[0].dtype if states else (p.dtype if p is not None else jnp.float64)
+        dtype = _dtype(states, p)
         p = self.parameters(p, dtype)
         lead = self.lead(list(states) + [p])
         outputs = self._evaluate(name, states, p, frame)

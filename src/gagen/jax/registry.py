@@ -16,8 +16,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-# the sizes a kernel's widths are written in: fields of the kernel tables
-SIZES = ("nq", "nv", "np", "nb", "nf", "nreg")
 # the state arguments of the methods and the size of each
 ARGUMENT_SIZES = {"q": "nq", "qd": "nv", "qdd": "nv", "tau": "nv"}
 
@@ -26,9 +24,9 @@ ARGUMENT_SIZES = {"q": "nq", "qd": "nv", "qdd": "nv", "tau": "nv"}
 class Kernel:
     """A C kernel of a model's table: `table` "model" (gagen_model_api) or "derivatives"
     (gagen_derivatives_api), its `member`, the sizes of its state inputs (before p), its
-    outputs' per-state shapes (each dimension a name of SIZES, a number, or a tuple of
-    those to multiply), whether it takes a frame index (after p) and whether it returns a
-    status (0: success)."""
+    outputs' per-state shapes (each dimension a size field of the table: nq, nv, np, nb,
+    nf, nreg; a number; or a tuple of those to multiply), whether it takes a frame index
+    (after p) and whether it returns a status (0: success)."""
 
     table: str
     member: str
@@ -94,11 +92,6 @@ class Method:
     @property
     def frame(self) -> bool:
         return KERNELS[self.kernel].frame
-
-    @property
-    def derivatives(self) -> bool:
-        """Whether it needs the model's derivative module."""
-        return KERNELS[self.kernel].table == "derivatives"
 
 
 METHODS: dict[str, Method] = {m.name: m for m in (
