@@ -353,8 +353,9 @@ def mjx_candidates(label, dyn, urdf: Path, Q, QD, T, notes: list) -> list[Candid
 
 
 def jax_rows(urdf_dir, scratch: Path, repeats: int, target: float, progress,
-             states: int = STATES, printed: bool = True) -> dict:
-    """The section: timing rows, compile rows and notes."""
+             states: int = STATES, printed: bool = True, cache_dir: Path | None = None) -> dict:
+    """The section: timing rows, compile rows and notes; the models are built into
+    `cache_dir` (default: a fresh folder under `scratch`)."""
     jax = optional("jax")
     if jax is None:
         note = "JAX is not installed (pip install gagen[jax]): the section is skipped."
@@ -374,6 +375,7 @@ def jax_rows(urdf_dir, scratch: Path, repeats: int, target: float, progress,
               ("ANYmal C", folder / ANYMAL, True, True)]
     notes.append("adam fails on prismatic joints (the Panda's fingers): adam and MJX run on "
                  "the Panda arm (fingers fixed), where gagen runs as well.")
+    cache_dir = cache_dir or scratch / "cache"
     cands: list[Candidate] = []
     compile_rows: list[dict] = []
     for label, urdf, floating, peers in models:
@@ -381,12 +383,12 @@ def jax_rows(urdf_dir, scratch: Path, repeats: int, target: float, progress,
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            dyn = gagen.load(urdf, floating_base=floating, cache_dir=scratch / "cache")
+            dyn = gagen.load(urdf, floating_base=floating, cache_dir=cache_dir)
         dyn.load_derivatives()
         Q, QD, T = _states(dyn, rng, states)
         progress(f"{label}: checking gagen's stacked call, FFI and printed functions")
         cands += gagen_candidates(label, dyn, Q, QD, T, printed, compile_rows, progress,
-                                  scratch / "cache")
+                                  cache_dir)
         if peers:
             progress(f"{label}: checking adam and MJX")
             cands += adam_candidates(label, dyn, urdf, Q, QD, T, notes)

@@ -404,9 +404,11 @@ class Bench:
         from .jaxbench import jax_rows
 
         s = self.settings
+        # the models' builds and printed JAX: in --cache-dir when given (kept between runs)
+        cache = Path(self.user_cache_dir) if self.user_cache_dir else None
         section = jax_rows(self.urdf_dir, self.scratch / "jax", s.jax_repeats, s.target_s,
                            progress=lambda text: self.progress("jax", text),
-                           states=s.jax_states)
+                           states=s.jax_states, cache_dir=cache)
         self.results["notes"].extend(section.get("notes", []))
         section["repeats"] = s.jax_repeats
         return section

@@ -16,6 +16,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from gagen.runtime.taskspace import LOCAL_WORLD_ALIGNED
+
 # the state arguments of the methods and the size of each
 ARGUMENT_SIZES = {"q": "nq", "qd": "nv", "qdd": "nv", "tau": "nv"}
 
@@ -26,7 +28,8 @@ class Kernel:
     (gagen_derivatives_api), its `member`, the sizes of its state inputs (before p), its
     outputs' per-state shapes (each dimension a size field of the table: nq, nv, np, nb,
     nf, nreg; a number; or a tuple of those to multiply), whether it takes a frame index
-    (after p) and whether it returns a status (0: success)."""
+    (after p) and then a reference (always LOCAL_WORLD_ALIGNED: the frame's origin, world
+    axes, the Dynamics methods' default) and whether it returns a status (0: success)."""
 
     table: str
     member: str
@@ -34,11 +37,13 @@ class Kernel:
     outputs: tuple[tuple, ...]
     frame: bool = False
     status: bool = False
+    reference: bool = False
 
     def c_arguments(self) -> str:
         """The C call's arguments, from the shim's arrays `in` and `out` and `frame`."""
         names = [f"in[{k}]" for k in range(len(self.inputs) + 1)]
         names += ["frame"] if self.frame else []
+        names += [str(LOCAL_WORLD_ALIGNED)] if self.reference else []
         return ", ".join(names + [f"out[{k}]" for k in range(len(self.outputs))])
 
     def c_widths(self) -> list[str]:
@@ -57,9 +62,9 @@ KERNELS: dict[str, Kernel] = {
     "frame_placement": Kernel("model", "frame_placement", ("nq",), ((3, 3), (3,)),
                               frame=True, status=True),
     "frame_jacobian": Kernel("model", "frame_jacobian", ("nq",), ((6, "nv"),), frame=True,
-                             status=True),
+                             status=True, reference=True),
     "frame_velocity": Kernel("model", "frame_velocity", ("nq", "nv"), ((6,),), frame=True,
-                             status=True),
+                             status=True, reference=True),
     "regressor": Kernel("model", "regressor", ("nq", "nv", "nv"), (("nv", "nreg"),)),
     "regressor_parameters": Kernel("model", "regressor_parameters", (), (("nreg",),)),
     "inverse_dynamics_derivatives": Kernel("derivatives", "inverse_dynamics_derivatives",
