@@ -15,7 +15,9 @@ all of them timed interleaved in one run (medians; the JAX calls wait for their 
                      jax.jacfwd of each JAX function above
 
 adam fails on prismatic joints (the Panda's fingers): it runs on the arm alone, where
-gagen runs too. The printed functions' compile times (jit of the vmapped function, with
+gagen runs too. adam and MJX take seconds per 4,096 states on the CPU (adam's Jacobian on
+ANYmal C: minutes): they run on fewer states (256, their Jacobians on 32), and every row's
+ratio is per state. The printed functions' compile times (jit of the vmapped function, with
 and without jacfwd) are measured in this process, after the printing (once per model,
 kept in the cache), which is reported apart.
 """
@@ -40,6 +42,10 @@ COMPILE_GOAL = 60.0  # seconds: the printed Panda derivatives' JIT
 # MJX on the CPU is slow (tens of ms per state here): it runs on fewer states
 MJX_STATES = 256
 MJX_JACOBIAN_STATES = 32
+# adam on the CPU: seconds per 4,096 states (its Jacobian on ANYmal C: minutes); the same
+# sizes as MJX, compared per state
+ADAM_STATES = 256
+ADAM_JACOBIAN_STATES = 32
 STACKED = "gagen stacked (NumPy)"
 FFI = "gagen FFI"
 PRINTED = "gagen printed JAX"
@@ -255,11 +261,16 @@ def adam_candidates(label, dyn, urdf: Path, Q, QD, T, notes: list) -> list[Candi
         notes.append(f"{label}: adam's result differs from gagen's ({exc}); timed anyway.")
     jac = jax.jit(jax.vmap(_fd_jacobian(fd))) if mapped == "vmap" else jax.jit(
         lambda a, b, c: jax.lax.map(lambda x: _fd_jacobian(fd)(*x), (a, b, c)))
+    notes.append(f"{label}: adam runs on the CPU at {ADAM_STATES} states (forward) and "
+                 f"{ADAM_JACOBIAN_STATES} (its Jacobian; seconds to minutes per 4,096): its "
+                 "rows compare per state.")
+    few = tuple(x[:ADAM_JACOBIAN_STATES] for x in (jq, jqd, jtau))
+    jac(*few)
     return [
         _c(label, "forward dynamics", ADAM, f"jax.jit(jax.{mapped}({call}))",
-           _blocking(batched), (jq, jqd, jtau)),
+           _blocking(batched), tuple(x[:ADAM_STATES] for x in (jq, jqd, jtau))),
         _c(label, "FD Jacobian", ADAM, f"jax.jit(jax.{mapped}(jax.jacfwd(...)))",
-           _blocking(jac), (jq, jqd, jtau)),
+           _blocking(jac), few),
     ]
 
 
@@ -402,7 +413,7 @@ def jax_rows(urdf_dir, scratch: Path, repeats: int, target: float, progress,
              "number": t.number, "repeats": len(t.samples)} for t in timings]
     base = {(r["model"], r["quantity"]): r["per_state_us"] for r in rows
             if r["implementation"] == STACKED}
-    for r in rows:  # per state: MJX runs on fewer states than the others
+    for r in rows:  # per state: adam and MJX run on fewer states than the others
         r["ratio"] = r["per_state_us"] / base[(r["model"], r["quantity"])]
     notes += goal_notes(rows, compile_rows)
     return {"rows": rows, "compile": compile_rows, "notes": notes, "states": states}
