@@ -24,6 +24,16 @@ def runtime_extension() -> Extension:
                      extra_compile_args=["-O3"])
 
 
+def constraint_terms_extension() -> Extension:
+    """The constrained dynamics' derivatives at one state (gagen.runtime.constraint_derivatives
+    calls it; without it, the same in NumPy)."""
+    return Extension("gagen.runtime._constraint_terms",
+                     [relative(HERE / "src/gagen/runtime/_constraint_terms.pyx")],
+                     include_dirs=[numpy.get_include()],
+                     define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
+                     extra_compile_args=["-O3"])
+
+
 def shipped_extensions() -> list[Extension]:
     """A model's module from its committed sources: its C files, module.c naming the module."""
     extensions = []
@@ -40,5 +50,6 @@ def shipped_extensions() -> list[Extension]:
     return extensions
 
 
-setup(ext_modules=[*cythonize([runtime_extension()], language_level=3, quiet=True),
+setup(ext_modules=[*cythonize([runtime_extension(), constraint_terms_extension()],
+                             language_level=3, quiet=True),
                    *shipped_extensions()])

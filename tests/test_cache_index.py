@@ -1,6 +1,6 @@
 """The cache's index separates every load option: one URDF loaded with and without a
-floating base, with and without the derivative module, strict or not, into one cache gets
-its own module for each (the right nq and nv, the derivative module of the same option),
+floating base, with and without the derivative module, strict or not, with and without
+constraints (and with other constrained axes), into one cache gets its own module for each (the right nq and nv, the derivative module of the same option),
 in one process and in fresh ones, where the index finds each without SymPy; an inertia
 accepted with a warning is still refused under strict=True."""
 
@@ -48,6 +48,18 @@ floating, derivatives = json.loads(sys.argv[3])
 dyn = load(sys.argv[1], sys.argv[2], floating, derivatives)
 found = "sympy" not in sys.modules
 print(json.dumps({"found without sympy": found, **facts(dyn)}))
+"""
+CONSTRAINED_IN_A_FRESH_PROCESS = """
+import json, sys, warnings
+import gagen
+axes = json.loads(sys.argv[3])
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore", gagen.InertiaWarning)
+    dyn = gagen.load(sys.argv[1], cache_dir=sys.argv[2],
+                     constraints=[gagen.Contact("l2", axes=axes)])
+print(json.dumps({"found without sympy": "sympy" not in sys.modules,
+                  "module": dyn.module.__name__,
+                  "J": dyn.constraint_jacobian([0.4, 0.05]).tolist()}))
 """
 STRICT_IN_A_FRESH_PROCESS = """
 import sys, gagen
@@ -150,3 +162,34 @@ def test_fresh_processes_find_each_option_in_the_index(probe, loaded):
     lines = proc.stdout.splitlines()
     assert len(lines) == 2 and all(line.startswith("refused:") and "strict=True" in line
                                    for line in lines), proc
+
+
+# the contact's axes -> the rows of its Jacobian
+CONTACTS = {"3d": ("3d", 3), "x": (["x"], 1)}
+
+
+def test_constraints_get_their_own_module_in_one_process_and_in_fresh_ones(probe, loaded):
+    path, cache = probe
+    q = np.array([0.4, 0.05])
+    modules, jacobians = {}, {}
+    for axes, (given, rows) in CONTACTS.items():
+        dyn = load(path, cache, False, constraints=[gagen.Contact("l2", axes=given)])
+        assert (dyn.nq, dyn.nv) == SIZES[False]
+        assert [c.name for c in dyn.constraints] == ["l2"]
+        modules[axes], jacobians[axes] = dyn.module.__name__, dyn.constraint_jacobian(q)
+        assert jacobians[axes].shape == (rows, 2)
+        # the same joints and masses as the unconstrained model
+        np.testing.assert_allclose(dyn.mass_matrix(q), np.array(values(
+            load(path, cache, False))["M"]), rtol=1e-12)
+    assert len({*modules.values(), loaded[False, False]["module"]}) == 3
+    # the x axis is the first row of the 3-D contact's
+    np.testing.assert_allclose(jacobians["x"], jacobians["3d"][:1], rtol=1e-12, atol=1e-15)
+    assert load(path, cache, False).constraint_jacobian(q).shape == (0, 2)
+    for axes in reversed(list(CONTACTS)):
+        proc = subprocess.run([sys.executable, "-c", CONSTRAINED_IN_A_FRESH_PROCESS, str(path),
+                               str(cache), json.dumps(CONTACTS[axes][0])],
+                              capture_output=True, text=True, timeout=600, check=False)
+        assert proc.returncode == 0, proc.stderr
+        got = json.loads(proc.stdout.splitlines()[-1])
+        assert got["found without sympy"] and got["module"] == modules[axes], got
+        np.testing.assert_array_equal(got["J"], jacobians[axes])

@@ -264,23 +264,7 @@ def tumbler(tmp_path_factory):
     return gagen.load(path, cache_dir=tmp_path_factory.mktemp("cache"))
 
 
-TUMBLER = """
-name: tumbler
-gravity: [0, 0, -g]
-parameters: {g: 9.81, m: 2.0}
-bodies:
-  - name: box
-    joint: {name: base, type: floating}
-    mass: m
-    com: [0.1, 0, 0]
-    inertia: [0.1, 0.2, 0.3, 0.01, 0, 0]
-  - name: arm
-    parent: box
-    joint: {name: hinge, type: revolute, axis: [0, 1, 0], origin: {xyz: [0.2, 0, 0]}}
-    mass: 1.0
-    com: [0, 0, -0.2]
-    inertia: [0.02, 0.02, 0.001, 0, 0, 0]
-"""
+TUMBLER = (Path(__file__).resolve().parent / "data" / "tumbler.yaml").read_text()
 
 
 # the tumble: from a turned, displaced base; g = 0

@@ -298,23 +298,7 @@ def test_the_bounds_are_in_one_table():
 
 # ========================================================= 2. quaternions that overflow
 
-TUMBLER = """
-name: tumbler
-gravity: [0, 0, -g]
-parameters: {g: 9.81, m: 2.0}
-bodies:
-  - name: box
-    joint: {name: base, type: floating}
-    mass: m
-    com: [0.1, 0, 0]
-    inertia: [0.1, 0.2, 0.3, 0.01, 0, 0]
-  - name: arm
-    parent: box
-    joint: {name: hinge, type: revolute, axis: [0, 1, 0], origin: {xyz: [0.2, 0, 0]}}
-    mass: 1.0
-    com: [0, 0, -0.2]
-    inertia: [0.02, 0.02, 0.001, 0, 0, 0]
-"""
+TUMBLER = (Path(__file__).resolve().parent / "data" / "tumbler.yaml").read_text()
 
 
 @pytest.fixture(scope="module")

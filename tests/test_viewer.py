@@ -401,6 +401,99 @@ def test_html_is_self_contained_and_written_whole(toy, tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["deep"]
 
 
+def test_html_page_draws_without_environment_map_or_shadows(toy, tmp_path):
+    """What made ANYmal C's first frame take 14-30 s in a browser without a GPU stays out
+    of the page: viser's environment map (prefiltered on the CPU), its shadow-casting
+    default lights and shadow maps on every mesh; the page's own lights are there instead."""
+    _, packages, dyn = toy
+    path = write_html(tmp_path / "l.html", dyn, [0.0], dyn.neutral()[None],
+                      package_dirs=[packages])
+    messages = [m for _, m in read_recording(path).messages]
+    kinds = [m["type"] for m in messages]
+    environment = [m for m in messages if m["type"] == "EnvironmentMapMessage"]
+    assert environment and environment[-1]["hdri_data"] is None
+    lights = [m for m in messages if m["type"] == "EnableLightsMessage"]
+    assert lights and not lights[-1]["enabled"] and not lights[-1]["cast_shadow"]
+    assert kinds.count("DirectionalLightMessage") == 3 and "HemisphereLightMessage" in kinds
+    assert not any(m["props"].get("cast_shadow") for m in messages
+                   if m["type"] == "DirectionalLightMessage")
+    glbs = [m["props"] for m in messages if m["type"] == "GlbMessage"]
+    assert len(glbs) == 6
+    assert not any(g["cast_shadow"] or g["receive_shadow"] for g in glbs)
+
+
+def textured_square(side: float, repeats: int = 1, edge: int = 2048):
+    """A square of `side` metres whose UVs cover an edge x edge texture `repeats` times
+    along each side."""
+    import trimesh
+    from PIL import Image
+
+    vertices = side * np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
+    uv = repeats * np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
+    image = Image.new("RGB", (edge, edge), (200, 30, 30))
+    material = trimesh.visual.material.PBRMaterial(baseColorTexture=image)
+    mesh = trimesh.Trimesh(vertices, [[0, 1, 2], [0, 2, 3]], process=False,
+                           visual=trimesh.visual.TextureVisuals(uv=uv, material=material))
+    return trimesh.Scene(mesh), image
+
+
+@pytest.mark.parametrize("side, repeats, scale, density, expected", [
+    (0.5, 1, 1.0, 500.0, 256),    # 250 texels along the square: the next power of two
+    (0.5, 1, 2.0, 500.0, 512),    # drawn twice as large: 500
+    (0.5, 2, 1.0, 500.0, 128),    # the texture repeated twice along each side: 125
+    (1.0, 1, 1.0, 5000.0, 1024),  # 5000: at most MAX_TEXTURE_EDGE
+    (0.01, 1, 1.0, 500.0, 32),    # 5: at least MIN_TEXTURE_EDGE
+    (0.5, 1, 1.0, None, 1024),    # no density asked for: MAX_TEXTURE_EDGE
+])
+def test_textures_are_sized_to_the_surface_they_cover(side, repeats, scale, density,
+                                                      expected):
+    """A texture is scaled down to the smallest power of two that still gives `density`
+    texels per metre on the surface it covers, and the page's glTF holds it at that size."""
+    import io
+
+    import trimesh
+
+    from gagen.viewer import scene as viewer_scene
+
+    assert (viewer_scene.MIN_TEXTURE_EDGE, viewer_scene.MAX_TEXTURE_EDGE) == (32, 1024)
+    square, image = textured_square(side, repeats)
+    edges = viewer_scene.texture_edges(square, (scale,) * 3, density)
+    assert edges == {id(image): expected}
+    glb = viewer_scene._export(square, None, None, {}, edges)
+    read = trimesh.load(io.BytesIO(glb), file_type="glb")
+    (mesh,) = read.geometry.values()
+    assert mesh.visual.material.baseColorTexture.size == (expected, expected)
+    assert image.size == (2048, 2048)  # the mesh file's own texture is left as it was
+
+
+def test_texture_density_gives_a_texel_per_pixel_in_the_opening_view(toy):
+    """texels_per_metre: a segment of 1/density metres at the point looked at, across the
+    view, spans one pixel of a SCREEN_PIXELS-high window in the opening camera's
+    perspective projection."""
+    _, _, dyn = toy
+
+    class Camera:
+        fov = 1.1  # radians, vertical
+
+    class Server:
+        initial_camera = Camera
+
+    position, look_at = viewer_html.opening_view(dyn, dyn.neutral())
+    density = viewer_html.texels_per_metre(Server, (position, look_at))
+    forward = (look_at - position) / np.linalg.norm(look_at - position)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+
+    def pixel_row(point):
+        relative = point - position
+        height = relative @ up / (relative @ forward) / np.tan(Camera.fov / 2)
+        return height * viewer_html.SCREEN_PIXELS / 2
+
+    assert pixel_row(look_at + up / density) - pixel_row(look_at) == pytest.approx(1.0,
+                                                                                  rel=1e-12)
+
+
 def test_names_inside_mesh_files_stay_out_of_the_page(toy, tmp_path):
     """A mesh file's node, geometry and material names are text from a description: the
     page's glTF carries numbered names instead."""

@@ -532,51 +532,63 @@ static void gagen_joint_motion(const double *X, int c, const double *rate, doubl
     }
 }
 
-/* The motion of body b and its ancestors (placed in X), each after its parent: at V + 12 c
- * its angular velocity, its origin's velocity, and with `accelerations` their rates (the
- * classical accelerations) at qdd (NULL: 0), world axes:
+/* The motion of body c (placed in X), its parent's in V: at V + 12 c its angular velocity,
+ * its origin's velocity, and with `accelerations` their rates (the classical
+ * accelerations) at qdd (NULL: 0), world axes:
  *   omega = omega_p + w            v = v_p + omega_p x r + u
  *   alpha = alpha_p + omega_p x w + S_w qdd
  *   a = a_p + alpha_p x r + omega_p x (omega_p x r) + 2 omega_p x u + w x u + S_u qdd
  * (r: the body's origin less its parent's; a joint's axes turn with its parent). */
+#if defined(__GNUC__) || defined(__clang__)
+#define GAGEN_TS_INLINE static inline __attribute__((always_inline))
+#else
+#define GAGEN_TS_INLINE static inline
+#endif
+
+GAGEN_TS_INLINE void gagen_body_motion(const double *X, const double *qd, const double *qdd,
+                                       int c, int accelerations, double *V)
+{
+    static const double rest[12] = {0.0};
+    const int parent = gagen_parent[c], kind = gagen_kind[c];
+    /* what is zero is skipped: the world's motion, u of a revolute or fixed joint,
+       w of a prismatic or fixed one */
+    const int turns = kind == 1 || kind == 3, slides = kind == 2 || kind == 3;
+    const double *P = parent < 0 ? rest : V + 12 * parent;
+    const double *o = X + 15 * c + 9, *op = parent < 0 ? rest : X + 15 * parent + 9;
+    double *out = V + 12 * c, u[3], w[3], r[3];
+    int i;
+    gagen_joint_motion(X, c, qd, u, w);
+    for (i = 0; i < 3; ++i) {
+        r[i] = o[i] - op[i];
+        out[i] = P[i] + w[i];
+        out[3 + i] = P[3 + i] + u[i];
+    }
+    if (parent >= 0) gagen_cross_add(P, r, 1.0, out + 3);
+    if (accelerations) {
+        double su[3], sw[3], wr[3] = {0.0, 0.0, 0.0};
+        gagen_joint_motion(X, c, qdd, su, sw);
+        for (i = 0; i < 3; ++i) {
+            out[6 + i] = P[6 + i] + sw[i];
+            out[9 + i] = P[9 + i] + su[i];
+        }
+        if (parent >= 0) {
+            gagen_cross_add(P, r, 1.0, wr);
+            if (turns) gagen_cross_add(P, w, 1.0, out + 6);
+            gagen_cross_add(P + 6, r, 1.0, out + 9);
+            gagen_cross_add(P, wr, 1.0, out + 9);
+            if (slides) gagen_cross_add(P, u, 2.0, out + 9);
+        }
+        if (kind == 3) gagen_cross_add(w, u, 1.0, out + 9);
+    }
+}
+
+/* The motion of body b and its ancestors, each after its parent. */
 static void gagen_path_motion(const double *X, const double *qd, const double *qdd, int b,
                               int accelerations, double *V)
 {
-    static const double rest[12] = {0.0};
-    int path[GAGEN_FR_NB], m = 0, i;
+    int path[GAGEN_FR_NB], m = 0;
     for (; b >= 0; b = gagen_parent[b]) path[m++] = b;
-    while (m-- > 0) {
-        const int c = path[m], parent = gagen_parent[c], kind = gagen_kind[c];
-        /* what is zero is skipped: the world's motion, u of a revolute or fixed joint,
-           w of a prismatic or fixed one */
-        const int turns = kind == 1 || kind == 3, slides = kind == 2 || kind == 3;
-        const double *P = parent < 0 ? rest : V + 12 * parent;
-        const double *o = X + 15 * c + 9, *op = parent < 0 ? rest : X + 15 * parent + 9;
-        double *out = V + 12 * c, u[3], w[3], r[3];
-        gagen_joint_motion(X, c, qd, u, w);
-        for (i = 0; i < 3; ++i) {
-            r[i] = o[i] - op[i];
-            out[i] = P[i] + w[i];
-            out[3 + i] = P[3 + i] + u[i];
-        }
-        if (parent >= 0) gagen_cross_add(P, r, 1.0, out + 3);
-        if (accelerations) {
-            double su[3], sw[3], wr[3] = {0.0, 0.0, 0.0};
-            gagen_joint_motion(X, c, qdd, su, sw);
-            for (i = 0; i < 3; ++i) {
-                out[6 + i] = P[6 + i] + sw[i];
-                out[9 + i] = P[9 + i] + su[i];
-            }
-            if (parent >= 0) {
-                gagen_cross_add(P, r, 1.0, wr);
-                if (turns) gagen_cross_add(P, w, 1.0, out + 6);
-                gagen_cross_add(P + 6, r, 1.0, out + 9);
-                gagen_cross_add(P, wr, 1.0, out + 9);
-                if (slides) gagen_cross_add(P, u, 2.0, out + 9);
-            }
-            if (kind == 3) gagen_cross_add(w, u, 1.0, out + 9);
-        }
-    }
+    while (m-- > 0) gagen_body_motion(X, qd, qdd, path[m], accelerations, V);
 }
 
 /* Frame k's velocity vel (its origin's, then angular) and, if acc is not NULL, its
@@ -756,23 +768,42 @@ int rrr_frame_jacobian_time_variation(const double *q, const double *qd,
  * touching its ancestors only; L's entries below the diagonal of M, D on it. A pivot that
  * is not clearly positive: M is not positive definite (NaN or inf: the state was not
  * finite). */
+static int gagen_ltdl_failed(double d, double diagonal)
+{
+    return isfinite(d) && isfinite(diagonal) ? GAGEN_TS_NOT_POSITIVE_DEFINITE
+                                             : GAGEN_TS_NONFINITE;
+}
+
+/* (written out for this tree: the same steps, in the same order, as the loops below would
+   take; 3 eliminations) */
 static int gagen_ltdl(double *M)
 {
-    double diagonal[GAGEN_FR_NV];
-    int k, i, j;
+    double diagonal[GAGEN_FR_NV], d, r = 0.0, a = 0.0;
+    int k;
     for (k = 0; k < GAGEN_FR_NV; ++k) diagonal[k] = M[GAGEN_FR_NV * k + k];
-    for (k = GAGEN_FR_NV - 1; k >= 0; --k) {
-        const double d = M[GAGEN_FR_NV * k + k];
-        if (!(d > 1e-13 * diagonal[k]) || !(diagonal[k] > 0.0))
-            return isfinite(d) && isfinite(diagonal[k]) ? GAGEN_TS_NOT_POSITIVE_DEFINITE
-                                                        : GAGEN_TS_NONFINITE;
-        for (i = gagen_dof_parent[k]; i >= 0; i = gagen_dof_parent[i]) {
-            const double a = M[GAGEN_FR_NV * k + i] / d;
-            for (j = i; j >= 0; j = gagen_dof_parent[j])
-                M[GAGEN_FR_NV * i + j] -= M[GAGEN_FR_NV * k + j] * a;
-            M[GAGEN_FR_NV * k + i] = a;
-        }
-    }
+    d = M[8];
+    if (!(d > 1e-13 * diagonal[2]) || !(diagonal[2] > 0.0))
+        return gagen_ltdl_failed(d, diagonal[2]);
+    r = 1.0 / d;
+    a = M[7] * r;
+    M[4] -= M[7] * a;
+    M[3] -= M[6] * a;
+    M[7] = a;
+    a = M[6] * r;
+    M[0] -= M[6] * a;
+    M[6] = a;
+    d = M[4];
+    if (!(d > 1e-13 * diagonal[1]) || !(diagonal[1] > 0.0))
+        return gagen_ltdl_failed(d, diagonal[1]);
+    r = 1.0 / d;
+    a = M[3] * r;
+    M[0] -= M[3] * a;
+    M[3] = a;
+    d = M[0];
+    if (!(d > 1e-13 * diagonal[0]) || !(diagonal[0] > 0.0))
+        return gagen_ltdl_failed(d, diagonal[0]);
+    (void)r;
+    (void)a;
     return 0;
 }
 
@@ -871,6 +902,136 @@ int rrr_operational_space_inertia(const double *q, const double *p, int count,
         for (j = 0; j < i; ++j)
             Lambda[rows * i + j] = Lambda[rows * j + i] =
                 0.5 * (Lambda[rows * i + j] + Lambda[rows * j + i]);
+    return 0;
+}
+
+/* ---------------------------------------------------------------------------------------
+ * Constraints: contacts (a frame held in the world) and closed loops (two frames held
+ * together), as declared when the model was built; the constrained forward dynamics and the
+ * impulse dynamics by the KKT system through M = L^T D L and the Delassus matrix of the
+ * active rows. gagen.runtime.constraints has the same arithmetic in NumPy, gagen.constraints
+ * the conventions (Pinocchio's RigidConstraintModel).
+ * ------------------------------------------------------------------------------------- */
+
+#define GAGEN_CN_COUNT 0
+#define GAGEN_CN_ROWS 0
+/* arrays of the rows need at least one entry */
+#define GAGEN_CN_MAXROWS 1
+#define GAGEN_CN_SINGULAR RRR_ERR_SINGULAR_CONSTRAINTS
+
+
+/* The active constraints' rows (active: one flag per constraint; NULL: all), in declaration
+ * order: J (m x NV), and where not NULL their drift, position error and the active
+ * constraints (their number in *count); returns m. */
+static int gagen_cn_rows(const double *q, const double *qd, const double *p,
+                         const unsigned char *active, double *J, double *drift, double *error,
+                         int *which, int *count)
+{
+    (void)q;
+    (void)qd;
+    (void)p;
+    (void)active;
+    (void)J;
+    (void)drift;
+    (void)error;
+    (void)which;
+    if (count != NULL) *count = 0;
+    return 0;
+}
+
+/* x <- L^-T x, with M = L^T D L factored in place (gagen_ltdl): from the last coordinate up */
+static void gagen_cn_back(const double *L, double *x)
+{
+    int k, i;
+    for (k = GAGEN_FR_NV - 1; k >= 0; --k)
+        if (x[k] != 0.0)
+            for (i = gagen_dof_parent[k]; i >= 0; i = gagen_dof_parent[i])
+                x[i] -= L[GAGEN_FR_NV * k + i] * x[k];
+}
+
+/* x <- L^-1 x: from the first coordinate down */
+static void gagen_cn_forward(const double *L, double *x)
+{
+    int k, i;
+    for (k = 0; k < GAGEN_FR_NV; ++k) {
+        double s = x[k];
+        for (i = gagen_dof_parent[k]; i >= 0; i = gagen_dof_parent[i])
+            s -= L[GAGEN_FR_NV * k + i] * x[i];
+        x[k] = s;
+    }
+}
+
+
+/* Every declared row's force: the active rows' lambda, zero for the others */
+static void gagen_cn_scatter(const unsigned char *active, const double *lambda, double *forces)
+{
+    (void)active;
+    (void)lambda;
+    (void)forces;
+}
+
+int rrr_constraint_jacobian(const double *q, const double *p,
+                                    const unsigned char *active, double *J)
+{
+    gagen_cn_rows(q, NULL, p, active, J, NULL, NULL, NULL, NULL);
+    return 0;
+}
+
+int rrr_constraint_drift(const double *q, const double *qd, const double *p,
+                                 const unsigned char *active, double *drift)
+{
+    double J[GAGEN_CN_MAXROWS * GAGEN_FR_NV];
+    gagen_cn_rows(q, qd, p, active, J, drift, NULL, NULL, NULL);
+    return 0;
+}
+
+int rrr_constraint_error(const double *q, const double *p, const unsigned char *active,
+                                 double *error)
+{
+    double J[GAGEN_CN_MAXROWS * GAGEN_FR_NV];
+    gagen_cn_rows(q, NULL, p, active, J, NULL, error, NULL, NULL);
+    return 0;
+}
+
+int rrr_constrained_forward_dynamics(const double *q, const double *qd,
+                                             const double *tau, const double *p,
+                                             const unsigned char *active, double kp,
+                                             double kd, double damping, double *qdd,
+                                             double *forces)
+{
+    double L[GAGEN_FR_NV * GAGEN_FR_NV], J[GAGEN_CN_MAXROWS * GAGEN_FR_NV];
+    double rhs[GAGEN_CN_MAXROWS], lambda[GAGEN_CN_MAXROWS];
+    int m, j, rc;
+    if (!(kp >= 0.0 && kd >= 0.0 && damping >= 0.0)) return GAGEN_ERR_BAD_ARG;
+    rrr_mass_matrix(q, p, L);
+    rc = gagen_ltdl(L);
+    if (rc != 0) return rc;
+    rrr_forcing(q, qd, tau, p, qdd);
+    gagen_cn_back(L, qdd);  /* f = L^-T F, the free motion's */
+    m = 0;
+    (void)J;
+    (void)rhs;
+    for (j = 0; j < GAGEN_FR_NV; ++j) qdd[j] /= L[GAGEN_FR_NV * j + j];
+    gagen_cn_forward(L, qdd);
+    if (forces != NULL) gagen_cn_scatter(active, lambda, forces);
+    (void)m;
+    return 0;
+}
+
+int rrr_impulse_dynamics(const double *q, const double *qd_minus, const double *p,
+                                 const unsigned char *active, double restitution,
+                                 double damping, double *qd_plus, double *impulses)
+{
+    double L[GAGEN_FR_NV * GAGEN_FR_NV], lambda[GAGEN_CN_MAXROWS], dv[GAGEN_FR_NV];
+    int j, rc;
+    if (!(restitution >= 0.0 && restitution <= 1.0 && damping >= 0.0)) return GAGEN_ERR_BAD_ARG;
+    rrr_mass_matrix(q, p, L);
+    rc = gagen_ltdl(L);
+    if (rc != 0) return rc;
+    for (j = 0; j < GAGEN_FR_NV; ++j) dv[j] = 0.0;
+    gagen_cn_forward(L, dv);
+    for (j = 0; j < GAGEN_FR_NV; ++j) qd_plus[j] = qd_minus[j] + dv[j];
+    if (impulses != NULL) gagen_cn_scatter(active, lambda, impulses);
     return 0;
 }
 

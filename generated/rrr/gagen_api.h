@@ -15,7 +15,7 @@
 
 #include "integrator.h"
 
-#define GAGEN_API_VERSION 3
+#define GAGEN_API_VERSION 4
 
 typedef struct {
     int version;                     /* GAGEN_API_VERSION */
@@ -71,6 +71,32 @@ typedef struct {
     int (*operational_space_inertia)(const double *q, const double *p, int count,
                                      const int *frames, int dims, double *work,
                                      double *Lambda);
+    /* constraints (frames.c; simulation.c): nc constraints of ncrows rows in all */
+    int nc, ncrows;
+    int (*constraint_jacobian)(const double *q, const double *p, const unsigned char *active,
+                               double *J);
+    int (*constraint_drift)(const double *q, const double *qd, const double *p,
+                            const unsigned char *active, double *drift);
+    int (*constraint_error)(const double *q, const double *p, const unsigned char *active,
+                            double *error);
+    int (*constrained_forward_dynamics)(const double *q, const double *qd, const double *tau,
+                                        const double *p, const unsigned char *active,
+                                        double kp, double kd, double damping, double *qdd,
+                                        double *forces);
+    int (*impulse_dynamics)(const double *q, const double *qd_minus, const double *p,
+                            const unsigned char *active, double restitution, double damping,
+                            double *qd_plus, double *impulses);
+    int (*simulate_constrained)(int method, const gagen_control *c, const double *p,
+                                const unsigned char *active, double kp, double kd,
+                                double damping, double t0, double t1, const double *y0,
+                                double rtol, const double *atol, double first_step,
+                                double max_step, long max_steps, double h,
+                                const double *t_eval, int n_eval, double *y_out,
+                                gagen_ode_stats *stats);
+    int (*constrained_outputs)(const gagen_control *c, const double *p,
+                               const unsigned char *active, double kp, double kd,
+                               double damping, long m, const double *t, const double *y,
+                               double *forces, double *errors);
 } gagen_model_api;
 
 typedef struct {

@@ -66,6 +66,15 @@ static const gagen_model_api api = {
     .frame_jacobian_time_variation = rrr_frame_jacobian_time_variation,
     .delassus = rrr_delassus,
     .operational_space_inertia = rrr_operational_space_inertia,
+    .nc = 0,
+    .ncrows = 0,
+    .constraint_jacobian = rrr_constraint_jacobian,
+    .constraint_drift = rrr_constraint_drift,
+    .constraint_error = rrr_constraint_error,
+    .constrained_forward_dynamics = rrr_constrained_forward_dynamics,
+    .impulse_dynamics = rrr_impulse_dynamics,
+    .simulate_constrained = rrr_simulate_constrained,
+    .constrained_outputs = rrr_constrained_outputs,
 };
 
 static struct PyModuleDef module_definition = {
@@ -85,7 +94,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "8aed104a3cd7bcbc86f9ec1e706c48b6e90f361dcb53bc8268b8247099b8383a") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "01f7dd19a20550f5503e7c45c37dee73b41d764b6b62a0eb03c5078e235940ff") < 0) {
         Py_DECREF(module);
         return NULL;
     }

@@ -49,6 +49,8 @@
 #define RRR_ERR_NONFINITE 2
 /* returned by rrr_operational_space_inertia when the frames' rows are dependent */
 #define RRR_ERR_SINGULAR_TASK 3
+/* returned by the constrained dynamics when the active constraints' rows are dependent */
+#define RRR_ERR_SINGULAR_CONSTRAINTS 4
 
 /* The references of frame quantities (Pinocchio's ReferenceFrame and its numbers): WORLD,
  * at the world's origin in world axes; LOCAL, at the frame's origin in its own axes;
@@ -163,6 +165,53 @@ int rrr_forward_dynamics_ext(const double *q, const double *qd, const double *ta
 int rrr_inverse_dynamics_ext(const double *q, const double *qd, const double *qdd,
                                      const double *p, int count, const int *frames,
                                      const double *wrenches, double *tau);
+
+/* Constraints (0, 0 rows), declared with the model:
+ * (gagen.constraints has the conventions: Pinocchio's RigidConstraintModel). active holds one
+ * flag per constraint (NULL: all active); the functions write the active rows, in
+ * declaration order, except forces and impulses: every declared row, 0 where inactive.
+ * They return 0, the mass matrix's errors, GAGEN_ERR_BAD_ARG for a negative gain, damping
+ * or restitution, or RRR_ERR_SINGULAR_CONSTRAINTS when the active rows are
+ * dependent (damping > 0 solves (J M^-1 J^T + damping I) lambda = ... instead). */
+#define RRR_NCONSTRAINTS 0
+#define RRR_CONSTRAINT_ROWS 0
+/* J: m x 3, row-major: J qd is the constrained rows' velocity */
+int rrr_constraint_jacobian(const double *q, const double *p,
+                                    const unsigned char *active, double *J);
+/* drift (m): dJ/dt qd, so that J qdd + drift = 0 holds the constraints */
+int rrr_constraint_drift(const double *q, const double *qd, const double *p,
+                                 const unsigned char *active, double *drift);
+/* error (m): the position error (a contact's from its anchor parameters) */
+int rrr_constraint_error(const double *q, const double *p, const unsigned char *active,
+                                 double *error);
+/* qdd and forces of M qdd = F(q, qd, tau) + J^T lambda, J qdd + drift = -kp error - kd J qd */
+int rrr_constrained_forward_dynamics(const double *q, const double *qd,
+                                             const double *tau, const double *p,
+                                             const unsigned char *active, double kp,
+                                             double kd, double damping, double *qdd,
+                                             double *forces);
+/* qd_plus and impulses of M (qd_plus - qd_minus) = J^T Lambda, J qd_plus = -r J qd_minus */
+int rrr_impulse_dynamics(const double *q, const double *qd_minus, const double *p,
+                                 const unsigned char *active, double restitution,
+                                 double damping, double *qd_plus, double *impulses);
+
+/* The robot simulated as rrr_simulate does, with the active constraints held by the
+ * constrained forward dynamics, Baumgarte's kp and kd and damping as there (gagen's generic
+ * dopri5 and rk4). Returns as rrr_simulate, or the constrained dynamics' errors. */
+int rrr_simulate_constrained(int method, const gagen_control *c, const double *p,
+                                     const unsigned char *active, double kp, double kd,
+                                     double damping, double t0, double t1, const double *y0,
+                                     double rtol, const double *atol, double first_step,
+                                     double max_step, long max_steps, double h,
+                                     const double *t_eval, int n_eval, double *y_out,
+                                     gagen_ode_stats *stats);
+/* At m samples (times t, states y): the constraint forces (m rows of every declared row) the
+ * constrained simulation had, and the position errors (the same rows; 0 where inactive).
+ * Returns 0, or the first failure (its rows of forces NaN). */
+int rrr_constrained_outputs(const gagen_control *c, const double *p,
+                                    const unsigned char *active, double kp, double kd,
+                                    double damping, long m, const double *t, const double *y,
+                                    double *forces, double *errors);
 
 /* Centre of mass and centroidal dynamics (Pinocchio's centerOfMass, ccrba, dccrba): 6-vectors
  * and the rows of 6 x 3 matrices (row-major) are linear then angular, in world axes, about

@@ -260,6 +260,123 @@ static void gagen_so_wrenches(const double *q, const double *p, int count, const
 #define GAGEN_SO_NS 38
 #define GAGEN_SO_GRAVITY 23
 #include "gagen_second_order.h"
+#include "gagen_generic.h"
+
+/* ---- the constrained simulation -------------------------------------------------------
+ * The constrained forward dynamics (frames.c) under the controller's torques, integrated
+ * by gagen's generic dopri5 and rk4 (gagen_generic.h: the same steps as scipy's RK45 and
+ * the same grid), with Baumgarte's correction (kp, kd) holding the constraints against drift. */
+typedef struct {
+    gagen_so_law law;
+    const double *p;
+    const unsigned char *active;
+    double kp, kd, damping;
+    long calls;
+} gagen_cn_sim;
+
+static int gagen_cn_sim_init(gagen_cn_sim *s, const gagen_control *c, const double *p,
+                             const unsigned char *active, double kp, double kd,
+                             double damping)
+{
+    int rc = gagen_so_law_init(&s->law, c);
+    if (rc != GAGEN_OK) return rc;
+    if (!(kp >= 0.0 && kd >= 0.0 && damping >= 0.0 && isfinite(kp) && isfinite(kd)
+          && isfinite(damping)))
+        return GAGEN_ERR_BAD_ARG;
+    s->p = p;
+    s->active = active;
+    s->kp = kp;
+    s->kd = kd;
+    s->damping = damping;
+    s->calls = 0;
+    return GAGEN_OK;
+}
+
+/* The torques at (t, y): the controller's, the constant wrenches', and (with Coulomb
+ * friction) what turns the exact sign of the dynamics into the simulations' smooth one */
+static void gagen_cn_sim_torques(const gagen_cn_sim *s, double t, const double *y, double *u)
+{
+    double G[GAGEN_SO_NV];
+    int i;
+    if (s->law.gravity_compensation) gagen_so_gravity(y, s->p, G);
+    else
+        for (i = 0; i < GAGEN_SO_NV; ++i) G[i] = 0.0;
+    gagen_so_control(&s->law, s->p, t, y, y + GAGEN_SO_NQ, G, u);
+    if (s->law.nframes > 0)
+        gagen_so_wrenches(y, s->p, s->law.nframes, s->law.frames, s->law.wrenches, u);
+}
+
+static int gagen_cn_rhs(void *ctx, double t, const double *y, double *dydt)
+{
+    gagen_cn_sim *s = (gagen_cn_sim *)ctx;
+    double u[GAGEN_SO_NV];
+    if (s->law.poll != NULL && ++s->calls % (8L * GAGEN_POLL_STEPS) == 0
+        && s->law.poll(s->law.poll_ctx) != 0)
+        return GAGEN_ERR_INTERRUPTED;
+    gagen_cn_sim_torques(s, t, y, u);
+    gagen_so_qdot(y, y + GAGEN_SO_NQ, dydt);
+    return rrr_constrained_forward_dynamics(y, y + GAGEN_SO_NQ, u, s->p, s->active,
+                                                   s->kp, s->kd, s->damping,
+                                                   dydt + GAGEN_SO_NQ, NULL);
+}
+
+int rrr_simulate_constrained(int method, const gagen_control *c, const double *p,
+                                     const unsigned char *active, double kp, double kd,
+                                     double damping, double t0, double t1, const double *y0,
+                                     double rtol, const double *atol, double first_step,
+                                     double max_step, long max_steps, double h,
+                                     const double *t_eval, int n_eval, double *y_out,
+                                     gagen_ode_stats *stats)
+{
+    double work[14 * GAGEN_SO_NY];
+    gagen_cn_sim s;
+    int rc = gagen_cn_sim_init(&s, c, p, active, kp, kd, damping);
+    if (rc != GAGEN_OK) {
+        gagen_ode_stats st = {0, 0, 0, 0, 0};
+        return gagen_finish(stats, &st, rc, y_out, 0, n_eval, GAGEN_SO_NY);
+    }
+    if (method == GAGEN_METHOD_DOPRI5)
+        return gagen_generic_dopri5(gagen_cn_rhs, &s, GAGEN_SO_NY, t0, t1, y0, rtol, atol,
+                                    first_step, max_step, max_steps, t_eval, n_eval, y_out,
+                                    work, stats);
+    if (method == GAGEN_METHOD_RK4)
+        return gagen_generic_rk4(gagen_cn_rhs, &s, GAGEN_SO_NY, t0, t1, y0, h, t_eval, n_eval,
+                                 y_out, work, stats);
+    return GAGEN_ERR_BAD_ARG;
+}
+
+int rrr_constrained_outputs(const gagen_control *c, const double *p,
+                                    const unsigned char *active, double kp, double kd,
+                                    double damping, long m, const double *t, const double *y,
+                                    double *forces, double *errors)
+{
+    gagen_cn_sim s;
+    double u[GAGEN_SO_NV], qdd[GAGEN_SO_NV], e[1];
+    long r;
+    int rc = gagen_cn_sim_init(&s, c, p, active, kp, kd, damping), status = 0;
+    if (rc != GAGEN_OK) return rc;
+    for (r = 0; r < m; ++r) {
+        const double *yr = y + r * GAGEN_SO_NY;
+        double *f = forces + r * 0, *err = errors + r * 0;
+        int k, i, row = 0;
+        gagen_cn_sim_torques(&s, t[r], yr, u);
+        rc = rrr_constrained_forward_dynamics(yr, yr + GAGEN_SO_NQ, u, p, active, kp, kd,
+                                                    damping, qdd, f);
+        if (rc != 0) {
+            for (i = 0; i < 0; ++i) f[i] = NAN;
+            if (status == 0) status = rc;
+        }
+        rrr_constraint_error(yr, p, active, e);
+        for (k = 0; k < 0; ++k) {
+            const int dims[1] = { 0 };
+            const int on = active == NULL || active[k];
+            for (i = 0; i < dims[k]; ++i) err[i] = on ? e[row + i] : 0.0;
+            err += dims[k];
+            if (on) row += dims[k];
+        }
+    }
+    return status;
+}
 
 GAGEN_KERNEL
 int rrr_forward_dynamics(const double *q, const double *qd, const double *tau,

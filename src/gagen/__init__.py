@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import importlib
 
+from .constraints import Contact, Loop
 from .errors import (
     BuildError,
     InertiaWarning,
     ModelError,
     NonFiniteStateError,
+    SingularConstraintError,
     SingularMassMatrixError,
     SingularTaskError,
 )
@@ -38,13 +40,16 @@ __all__ = [
     "BatchResult",
     "BuildError",
     "ComputedTorque",
+    "Contact",
     "Eq11Trajectory",
     "Equations",
     "InertiaWarning",
+    "Loop",
     "Model",
     "ModelError",
     "NonFiniteStateError",
     "SimulationResult",
+    "SingularConstraintError",
     "SingularMassMatrixError",
     "SingularTaskError",
     "__version__",

@@ -4,6 +4,8 @@
 - `BuildError` (and `CompilerNotFoundError`): generated code that did not compile.
 - `SingularMassMatrixError`: M(q) is singular or not positive definite at a state.
 - `SingularTaskError`: a task's rows are dependent: no operational-space inertia there.
+- `SingularConstraintError`: the active constraints' rows are dependent: no unique
+  constraint forces there (redundant rows, a loop at a singular configuration).
 - `InertiaWarning`: an inertia slightly off physical (CAD round-off), accepted unless strict.
 """
 
@@ -68,6 +70,12 @@ class SingularMassMatrixError(np.linalg.LinAlgError):
 class SingularTaskError(np.linalg.LinAlgError):
     """The rows of a task (frames' stacked Jacobian rows) are linearly dependent at the given
     state, so its operational-space inertia (J M⁻¹ Jᵀ)⁻¹ does not exist."""
+
+
+class SingularConstraintError(SingularTaskError):
+    """The rows of the active constraints are linearly dependent at the given state
+    (redundant rows, a loop at a singular configuration, a frame that cannot move): J M⁻¹ Jᵀ
+    is singular and the constraint forces are not unique. `damping=` gives a damped solve."""
 
 
 class InertiaWarning(UserWarning):

@@ -14,6 +14,8 @@ from functools import cached_property
 
 import numpy as np
 
+from .constraints import Constraint, ConstraintInfo, constraint_infos
+
 # joint kinds in the tables of frame kinematics (manifest, frames.c)
 JOINT_KINDS = {"fixed": 0, "revolute": 1, "continuous": 1, "prismatic": 2, "floating": 3}
 
@@ -68,6 +70,18 @@ class ModelInfo:
     # the moving bodies (fixed ones merged in), in coordinate order: the regressor's
     # columns are named after them
     moving_bodies: tuple[str, ...] = ()
+    # contacts and closed loops (gagen.constraints), in declaration order
+    constraints: tuple[Constraint, ...] = ()
+
+    @cached_property
+    def constraint_infos(self) -> tuple[ConstraintInfo, ...]:
+        """`dyn.constraints`: each constraint with its rows in the stacked forces."""
+        return tuple(constraint_infos(self.constraints))
+
+    @property
+    def constraint_rows(self) -> int:
+        """The rows of every declared constraint together."""
+        return sum(c.dimension for c in self.constraints)
 
     @cached_property
     def frame_indices(self) -> dict[str, int]:
@@ -171,6 +185,9 @@ class ModelInfo:
                 "bodies": [list(item) for item in self.bodies],
                 "frames": [list(item) for item in self.frames],
                 "moving_bodies": list(self.moving_bodies)}
+        if self.constraints:  # absent otherwise: unconstrained models' manifests as before
+            data["constraints"] = [[c.name, c.type, list(c.frames), list(c.axes), c.reference]
+                                   for c in self.constraints]
         return json.dumps(data, sort_keys=True, ensure_ascii=False).encode().hex()
 
     @classmethod
@@ -182,7 +199,11 @@ class ModelInfo:
                    bodies=tuple(tuple(int(x) for x in b) for b in data.get("bodies", ())),
                    frames=tuple((str(name), int(b), str(kind))
                                 for name, b, kind in data.get("frames", ())),
-                   moving_bodies=tuple(data.get("moving_bodies", ())))
+                   moving_bodies=tuple(data.get("moving_bodies", ())),
+                   constraints=tuple(
+                       Constraint(str(name), str(kind), tuple(str(f) for f in frames),
+                                  tuple(int(a) for a in axes), str(reference))
+                       for name, kind, frames, axes, reference in data.get("constraints", ())))
 
     @classmethod
     def from_model(cls, model) -> ModelInfo:
@@ -204,7 +225,8 @@ class ModelInfo:
                    parameters=tuple((name, float(value))
                                     for name, value in model.parameters.items()),
                    bodies=bodies, frames=frames,
-                   moving_bodies=tuple(body.name for body in model.moving_bodies))
+                   moving_bodies=tuple(body.name for body in model.moving_bodies),
+                   constraints=tuple(getattr(model, "constraints", ())))
 
 
 # A moving body's inertial parameters in the regressor, Pinocchio's order (its

@@ -3,9 +3,9 @@
 Modules: `timing` (the interleaved runner every section uses), `peers` (Pinocchio, PyDy
 and plain SymPy versions of the same robot), `percall`, `batched`, `simulation`,
 `scaling`, `coldbuild`, `pinocchio_cpp`, `floating`, `centroidal`, `taskspace`,
-`derivatives`, `casadi`, `jaxbench`, `report` (report.md and PNG plots) and `run` (the
-whole suite). Pinocchio and PyDy are optional (`pip install gagen[bench]`); without them
-their rows are skipped.
+`constraints`, `derivatives`, `casadi`, `jaxbench`, `report` (report.md and PNG plots) and
+`run` (the whole suite). Pinocchio and PyDy are optional (`pip install gagen[bench]`);
+without them their rows are skipped.
 
 This module holds only the command's description (gagen.app.cli parses the command line);
 the measurement code is imported when it runs.
@@ -53,6 +53,10 @@ Default (a few minutes on 2 cores):
                     an ANYmal C foot against Pinocchio (forwardKinematics +
                     getFrameClassicalAcceleration, computeJointJacobiansTimeVariation +
                     getFrameJacobianTimeVariation, computeMinverse + Jacobian products)
+  constraints       ANYmal C standing on four 3-D point contacts: the constrained forward
+                    dynamics and impulse dynamics against Pinocchio's constraintDynamics
+                    and impulseDynamics (exact KKT solution, mu = 0), their derivatives
+                    against computeConstraintDynamicsDerivatives
   casadi            gagen.casadi against adam's CasADi dynamics (the Panda with fixed
                     fingers, ANYmal C): forward dynamics and its Jacobian per evaluation
                     inside CasADi (SX, and generated C at -O3; adam's compiles cached in

@@ -283,6 +283,18 @@ def markdown(results: dict, images: dict | None = None) -> str:
         "`getFrameJacobianTimeVariation`, `computeMinverse` + `computeFrameJacobian` + "
         f"NumPy; {ts.get('repeats', '?')} interleaved repeats, ratios to gagen "
         "(> 1: slower than gagen).", percall_table, None, images)
+    cs = results.get("constraints", {})
+    lines += _section(
+        results, "constraints", "Constrained dynamics per call: ANYmal C on four feet",
+        "`dyn.constrained_forward_dynamics(q, qd, tau)`, `dyn.impulse_dynamics(q, qd)` and "
+        "`dyn.constrained_forward_dynamics_derivatives(q, qd, tau)` (against "
+        "`constraintDynamics` + `computeConstraintDynamicsDerivatives`) "
+        "with the four feet as 3-D point contacts (LOCAL_WORLD_ALIGNED) against Pinocchio's "
+        "`constraintDynamics` and `impulseDynamics` on its own URDF parse (FreeFlyer; "
+        "`RigidConstraintModel` CONTACT_3D per foot, `initConstraintDynamics` once, "
+        "`ProximalSettings(1e-12, mu=0, 1)`: the exact KKT solution), checked equal first; "
+        f"{cs.get('repeats', '?')} interleaved repeats, ratios to gagen (> 1: slower than "
+        "gagen).", percall_table, None, images)
     lines += _casadi_lines(results, images)
     sc = results.get("scaling", {})
     lines += _section(

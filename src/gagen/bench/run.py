@@ -28,7 +28,7 @@ from .common import PANDA, Progress, compiled, find_urdf_dir, machine_info, opti
 
 SECTIONS = ("percall", "batched", "simulation", "throughput", "scaling", "derivatives",
             "panda", "floating", "regressor", "centroidal",
-            "taskspace", "casadi", "jax")
+            "taskspace", "constraints", "casadi", "jax")
 
 
 @dataclass
@@ -300,6 +300,22 @@ class Bench:
             self._note("taskspace", note)
         return {"rows": rows, "repeats": s.panda_repeats}
 
+    def constraints(self) -> dict:
+        from .constraints import ROBOT, constraints_rows, goal_notes
+
+        s = self.settings
+        folder = find_urdf_dir(self.urdf_dir, needed=ROBOT)
+        if folder is None:
+            note = f"{ROBOT} was not found: the constraints section is skipped (--urdf-dir)"
+            self.results["notes"].append(note)
+            return {"rows": [], "skipped": note}
+        rows = constraints_rows(folder, self.scratch / "constraints", s.panda_repeats,
+                                s.target_s, progress=lambda text: self.progress("constraints",
+                                                                                text))
+        for note in goal_notes(rows):
+            self._note("constraints", note)
+        return {"rows": rows, "repeats": s.panda_repeats}
+
     def derivatives(self) -> dict:
         from ..model.resolve import resolve_model
         from .derivatives import build_rows, derivative_rows, goal_note
@@ -427,7 +443,8 @@ class Bench:
                   "throughput": "throughput", "scaling": "scaling",
                   "derivatives": "derivatives", "panda": "panda", "floating": "floating",
                   "regressor": "regressor", "centroidal": "centroidal",
-                  "taskspace": "task space", "casadi": "casadi", "jax": "jax"}
+                  "taskspace": "task space", "constraints": "constraints",
+                  "casadi": "casadi", "jax": "jax"}
         try:
             if {"percall", "batched", "simulation", "throughput"} & set(self.settings.sections):
                 start = time.perf_counter()

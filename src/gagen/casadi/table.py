@@ -366,9 +366,86 @@ CENTROIDAL_BIAS = Entry(
     doc="b = centroidal_bias(q, qd) = dAg qd: central differences",
 )
 
+# --- task space (where the model's C has it): LOCAL_WORLD_ALIGNED, classical accelerations ---
+
+def _central_by(output: str, inputs: tuple[int, ...]) -> str:
+    """C: central differences of the entry's value into D_<output>_<input> for each input
+    number (0: q by its nq entries, 1: qd); returns the first failure."""
+    names = {0: "q", 1: "qd"}
+    calls = "\n".join(f"""    {{{{
+        double *blocks[1] = {{{{D_{output}_{names[k]}}}}};
+        status = gc_central(GC_SELF, frame, in, {k}, blocks, ws);
+        if (status) return status;
+    }}}}""" for k in inputs)
+    return f"\n    int status;\n{calls}\n    return 0;"
+
+
+FRAME_ACCELERATION = Entry(
+    name="frame_acceleration",
+    inputs=(_q(), _v("qd"), _v("qdd")),
+    outputs=(Port("a", 6),),
+    value="return {ident}_frame_acceleration(q, qd, qdd, p, frame, GAGEN_LOCAL_WORLD_ALIGNED, "
+          "GAGEN_CLASSICAL, a);",
+    # a = J qdd + dJ/dt qd: by qdd the frame Jacobian, exact; by q and qd central differences
+    jacobian="""
+    {{
+        int rc = {ident}_frame_jacobian(q, p, frame GC_LWA, D_a_qdd);
+        if (rc) return rc;
+    }}""" + _central_by("a", (0, 1)),
+    work=lambda s: 2 * s["central"],
+    tangent=False,
+    per_frame=True,
+    requires=("frame_acceleration", "frame_jacobian"),
+    doc="a = frame_acceleration(q, qd, qdd, frame) (classical, LOCAL_WORLD_ALIGNED): by qdd "
+        "the frame Jacobian, by q and qd central differences",
+)
+
+FRAME_BIAS_ACCELERATION = Entry(
+    name="frame_bias_acceleration",
+    inputs=(_q(), _v("qd")),
+    outputs=(Port("a", 6),),
+    value="return {ident}_frame_bias_acceleration(q, qd, p, frame, "
+          "GAGEN_LOCAL_WORLD_ALIGNED, GAGEN_CLASSICAL, a);",
+    jacobian=_central_by("a", (0, 1)),
+    work=lambda s: 2 * s["central"],
+    tangent=False,
+    per_frame=True,
+    requires=("frame_bias_acceleration",),
+    doc="a = frame_bias_acceleration(q, qd, frame) = dJ/dt qd (classical, "
+        "LOCAL_WORLD_ALIGNED): central differences",
+)
+
+FRAME_JACOBIAN_TIME_VARIATION = Entry(
+    name="frame_jacobian_time_variation",
+    inputs=(_q(), _v("qd")),
+    outputs=(Port("dJ", 6, "nv"),),
+    value="return {ident}_frame_jacobian_time_variation(q, qd, p, frame, "
+          "GAGEN_LOCAL_WORLD_ALIGNED, dJ);",
+    per_frame=True,
+    requires=("frame_jacobian_time_variation",),
+    doc="dJ = frame_jacobian_time_variation(q, qd, frame) (LOCAL_WORLD_ALIGNED): central "
+        "differences",
+)
+
+# The operational-space inertia is G's inverse: singular wherever a frame has fewer than six
+# independent directions (most frames of most robots), where a CasADi function could only
+# fail mid-optimisation; users solve with G instead (docs/casadi.md).
+DELASSUS = Entry(
+    name="delassus",
+    inputs=(_q(),),
+    outputs=(Port("G", 6, 6),),
+    value="""double work[6 * NV];
+    return {ident}_delassus(q, p, 1, &frame, 6, work, G);""",
+    per_frame=True,
+    requires=("delassus",),
+    doc="G = delassus(q, frame) = J M^-1 J^T of the frame's LOCAL_WORLD_ALIGNED Jacobian "
+        "(M factorised, never inverted): central differences",
+)
+
 # The table: the order of the dictionary gagen.casadi.functions returns.
 ENTRIES: tuple[Entry, ...] = (FORWARD_DYNAMICS, INVERSE_DYNAMICS, MASS_MATRIX, GRAVITY,
                               CORIOLIS_MATRIX, FRAME_PLACEMENT, FRAME_JACOBIAN, FRAME_VELOCITY,
                               CENTER_OF_MASS, COM_VELOCITY, COM_JACOBIAN, CENTROIDAL_MAP,
                               CENTROIDAL_MOMENTUM, CENTROIDAL_MAP_TIME_VARIATION,
-                              CENTROIDAL_BIAS)
+                              CENTROIDAL_BIAS, FRAME_ACCELERATION, FRAME_BIAS_ACCELERATION,
+                              FRAME_JACOBIAN_TIME_VARIATION, DELASSUS)

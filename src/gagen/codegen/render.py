@@ -39,7 +39,7 @@ from .stages import StageSplit, split_stages
 
 # copied verbatim next to the generated sources (templates/c/)
 COPIED_FILES = ("integrator.c", "integrator.h", "gagen_ode.h", "gagen_second_order.h",
-                "gagen_math.h", "gagen_api.h")
+                "gagen_generic.h", "gagen_math.h", "gagen_api.h")
 # the C files of a model, all compiled into its module (plain C, usable without Python)
 MODEL_C_FILES = ("mass_matrix.c", "rhs.c", "simulation.c", "inverse_dynamics.c", "frames.c",
                  "regressor.c", "centroidal.c", "integrator.c")
@@ -855,6 +855,10 @@ def generate(eqs: Equations, module_name: str, key: str,
         # the moving bodies for centroidal.c: (body, moving parent, kind, first coordinate)
         "centroidal": info.moving_tree,
         "dof_parents": dof_parents(info.bodies, n),
+        "ltdl_plan": ltdl_plan(dof_parents(info.bodies, n)),
+        # the constraints: numbers only (their names stay in the manifest)
+        **constraint_context(info, list(model.parameters)),
+        "jointed": info.jointed_coordinates(),
         "ldlt": ldlt_plan(n, zero),
         "zero_fill": zero_fill,
         "blocks": blocks,
@@ -887,6 +891,102 @@ def generate(eqs: Equations, module_name: str, key: str,
         files[name] = f"/* {context['header']} (copied from gagen's templates) */\n" + text
     return GeneratedCode(files=files, ops_before=cse.ops_before, ops_after=cse.ops_after,
                          cse_seconds=cse.seconds, module_name=module_name, ident=ident)
+
+
+# M = L^T D L is written out (taskspace.c) up to this many eliminations: ANYmal C has 237,
+# Talos 1,000 or so; a 50-link chain 21,000, which stays a loop
+LTDL_UNROLLED = 4000
+
+
+def ltdl_plan(parents: list[int]) -> list[tuple[int, list[tuple[int, list[int]]]]] | None:
+    """The steps of Featherstone's factorisation M = L^T D L on this tree (taskspace.c's
+    gagen_ltdl): per coordinate k from the last, each ancestor i with the coordinates j it
+    updates (i and its ancestors); None when they number more than LTDL_UNROLLED."""
+    plan, count = [], 0
+    for k in reversed(range(len(parents))):
+        steps = []
+        i = parents[k]
+        while i >= 0:
+            js, j = [], i
+            while j >= 0:
+                js.append(j)
+                j = parents[j]
+            steps.append((i, js))
+            count += len(js)
+            i = parents[i]
+        plan.append((k, steps))
+        if count > LTDL_UNROLLED:
+            return None
+    return plan
+
+
+def constraint_context(info: ModelInfo, parameters: list[str]) -> dict:
+    """The tables of constraints.c: per constraint its frames (-1: the world), reference
+    (Pinocchio's number), 6-D or 3-D convention, rows, first row and where a contact's
+    anchor parameters are in p (-1: none); per row its axis; the header's list of them."""
+    table, axes, row = [], [], 0
+    for c in info.constraints:
+        anchors = c.anchor_names()
+        table.append({"a": info.frame_indices[c.frames[0]],
+                      "b": info.frame_indices[c.frames[1]] if c.type == "loop" else -1,
+                      "reference": 1 if c.reference == "local" else 2,
+                      "six": int(c.holds_frame), "dim": c.dimension, "first": row,
+                      "anchor": [parameters.index(a) for a in anchors] + [-1] * (6 - len(anchors))})
+        axes += list(c.axes)
+        row += c.dimension
+    names = [f"{c.type} {c_identifier(c.name)}: {' '.join(c.axis_names)}, {c.reference}"
+             for c in info.constraints]
+    paths = [set().union(*(_path_coordinates(info, f) for f in c.frames))
+             for c in info.constraints]
+    ranges = [_runs(path) for path in paths]
+    common = [_runs(paths[k] & paths[j]) for k in range(len(paths)) for j in range(k + 1)]
+    parents = dof_parents(info.bodies, info.dof)
+    eliminations = [[(c, i) for c in sorted(path, reverse=True) for i in _ancestors(parents, c)]
+                    for path in paths]
+    size = sum(len(e) * c.dimension for e, c in zip(eliminations, info.constraints))
+    return {"constraint_table": table, "constraint_axes": axes, "constraint_rows": row,
+            "constraint_names": names, "constraint_ranges": ranges,
+            "constraint_common": common,
+            "constraint_range_size": max([len(r) for r in ranges + common] + [1]),
+            # each constraint's rows of J L^-1, written out up to a size
+            "constraint_eliminations": eliminations if size <= CONSTRAINT_UNROLLED else None}
+
+
+# the rows of J L^-1 are written out per constraint (constraints.c) up to this many
+# multiply-adds over all constraints: ANYmal C's four feet have 432
+CONSTRAINT_UNROLLED = 6000
+
+
+def _ancestors(parents: list[int], c: int) -> list[int]:
+    out, i = [], parents[c]
+    while i >= 0:
+        out.append(i)
+        i = parents[i]
+    return out
+
+
+def _runs(coordinates: set[int]) -> list[tuple[int, int]]:
+    """Sorted coordinates as runs [start, stop) of consecutive ones."""
+    runs: list[tuple[int, int]] = []
+    for c in sorted(coordinates):
+        if runs and runs[-1][1] == c:
+            runs[-1] = (runs[-1][0], c + 1)
+        else:
+            runs.append((c, c + 1))
+    return runs
+
+
+def _path_coordinates(info: ModelInfo, frame: str) -> set[int]:
+    """The velocity coordinates of the joints between a frame and the world: the columns
+    where its Jacobian, and its rows of J L^-1, can be non-zero."""
+    sizes = {JOINT_KINDS["fixed"]: 0, JOINT_KINDS["floating"]: 6}
+    out: set[int] = set()
+    body = info.frames[info.frame_indices[frame]][1]
+    while body >= 0:
+        parent, kind, column = info.bodies[body]
+        out.update(range(column, column + sizes.get(kind, 1)))
+        body = parent
+    return out
 
 
 def dof_parents(bodies, n: int) -> list[int]:

@@ -21,9 +21,17 @@ will read. Bodies, joints, inertias and gravity are then read from the compiled 
   model disables gravity).
 - Unnamed bodies and joints are named `body<id>` and `joint<id>` (MuJoCo's ids).
 
+- `<equality connect>` and `<equality weld>` become constraints (gagen.constraints): a
+  connect holds a point of body1 (its `anchor`) on the point of body2 where it is at
+  MuJoCo's qpos0 (3-D, world axes), a weld holds body1 at `relpose` (or where it is at
+  qpos0) from body2 (6-D); each is a loop between two new frames, or a contact when body2
+  (or body1) is the world, anchored where MuJoCo anchors it. Sites (site1, site2) too.
+  They are rigid: MuJoCo's solref and solimp soften them, gagen does not. Every one is
+  declared, whatever its `active`: `active=` of the constrained dynamics chooses.
+
 Not modelled (they are not part of M(q) and the bias forces): contacts, equality
-constraints, tendons, actuators, joint stiffness and `gravcomp`. Joint damping, friction
-loss and armature are returned by `joint_terms`.
+constraints of joints, tendons and flexes, tendons, actuators, joint stiffness and
+`gravcomp`. Joint damping, friction loss and armature are returned by `joint_terms`.
 """
 
 from __future__ import annotations
@@ -36,6 +44,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelError, one_line, warn_user
+from .constraints import attach_constraints
 from .inputs import MAX_BODIES, name_field, quote
 from .merge import merge_fixed_joints, symmetric
 from .mjcf_files import scan_mjcf
@@ -145,10 +154,88 @@ def model_from_mjmodel(mj, source: str = "<mjcf>", strict: bool = False) -> Mode
         raise ModelError(source, "<worldbody>", "no hinge or slide joint: nothing can move")
     g, direction = _gravity(mj)
     bodies = _with_joint_terms(bodies, joint_terms(mj, source))
+    entries, anchors, more = _equalities(mj, names, tips, source)
     model = Model(name=names.model, bodies=tuple(bodies), parameters={"g": g},
                   gravity=vector([-sp.Symbol("g") * d for d in direction]), source=source,
-                  extra_frames=tuple(frames))
-    return parameterize_joint_terms(parameterize_mass_properties(merge_fixed_joints(model)))
+                  extra_frames=tuple(frames) + tuple(more))
+    model = parameterize_joint_terms(parameterize_mass_properties(merge_fixed_joints(model)))
+    return attach_constraints(model, entries, "<equality>", anchors) if entries else model
+
+
+# --- equality constraints ---------------------------------------------------------------------
+
+_CONNECT, _WELD = 0, 1  # mujoco.mjtEq
+_OBJ_BODY, _OBJ_SITE = 1, 6  # mujoco.mjtObj
+
+
+def _equalities(mj, names: _Names, tips: dict, source: str):
+    """MuJoCo's connect and weld equalities as gagen constraints: (entries, the contacts'
+    anchors {name: (xyz, rpy)}, the new frames). A frame is placed in the gagen body that
+    carries the MuJoCo body (`tips`: that body and its last joint's anchor)."""
+    entries, anchors, frames, skipped = [], {}, [], []
+    taken = set()
+    for e in range(mj.neq):
+        kind = int(mj.eq_type[e])
+        if kind not in (_CONNECT, _WELD):
+            skipped.append(e)
+            continue
+        name = _mujoco().mj_id2name(mj, _mujoco().mjtObj.mjOBJ_EQUALITY, e) or f"equality{e}"
+        name = name_field(name, source, f"<equality> #{e}")
+        while name in taken:
+            name += "_"
+        taken.add(name)
+        a, b = _equality_frames(mj, e, kind)  # (body id, R, p) of each, in MuJoCo's body
+        placed = []
+        for tag, (body, R, p) in zip(("a", "b"), (a, b)):
+            if body == 0:
+                placed.append(None)
+                continue
+            host, anchor = tips[body]
+            frame = Frame(names.frame(f"{name}_{tag}"), host, xyz=_vector(p - anchor),
+                          rotation=_rotation(R))
+            frames.append(frame)
+            placed.append(frame.name)
+        axes = "3d" if kind == _CONNECT else "6d"
+        if placed[0] is None and placed[1] is None:
+            skipped.append(e)
+            continue
+        if placed[0] is None or placed[1] is None:  # one side is the world: a contact
+            world = a if placed[0] is None else b
+            frame = placed[1] if placed[0] is None else placed[0]
+            entries.append({"name": name, "type": "contact", "frame": frame, "axes": axes})
+            anchors[name] = (np.asarray(world[2], dtype=float), _rpy(world[1]))
+        else:
+            entries.append({"name": name, "type": "loop", "frames": placed, "axes": axes})
+    if skipped:
+        warn_user(one_line(f"{source}: <equality>: {len(skipped)} equality constraint(s) "
+                           "other than connect and weld between bodies are not modelled"),
+                  UserWarning)
+    return entries, anchors, frames
+
+
+def _equality_frames(mj, e: int, kind: int):
+    """The two frames a connect or weld holds together, each (MuJoCo body id, axes, origin)
+    in that body's frame (the world's for body 0), as MuJoCo places them (eq_data)."""
+    data = np.asarray(mj.eq_data[e], dtype=float)
+    one, two = int(mj.eq_obj1id[e]), int(mj.eq_obj2id[e])
+    if int(mj.eq_objtype[e]) == _OBJ_SITE:
+        sites = []
+        for s in (one, two):
+            sites.append((int(mj.site_bodyid[s]), _quat_matrix(mj.site_quat[s]),
+                          np.asarray(mj.site_pos[s], dtype=float)))
+        return sites[0], sites[1]
+    if kind == _CONNECT:  # anchor in body1, and where it is in body2 at qpos0
+        return (one, np.eye(3), data[0:3]), (two, np.eye(3), data[3:6])
+    # weld: body1's frame times relpose (body2's pose in body1) is body2's; at the anchor,
+    # a point of body2
+    R_rel, p_rel, anchor = _quat_matrix(data[6:10]), data[3:6], data[0:3]
+    return (one, R_rel, p_rel + R_rel @ anchor), (two, np.eye(3), anchor)
+
+
+def _rpy(R: np.ndarray) -> np.ndarray:
+    from .constraints import rpy_of
+
+    return rpy_of(R)
 
 
 def _with_joint_terms(bodies: list[Body], terms: dict[str, dict[str, float]]) -> list[Body]:
@@ -207,6 +294,11 @@ class _Names:
     def intermediate(self, body: str, joint: str) -> str:
         """A massless body between two joints of one MuJoCo body."""
         return self._fresh(f"{body}_{joint}")
+
+    def frame(self, name: str) -> str:
+        """A frame of an equality constraint: a name no body or joint has."""
+        self._taken.update(self._joints.values())
+        return self._fresh(name)
 
     def _all(self, kind: str, count: int, obj: int, first: int) -> dict[int, str]:
         given = {i: self._given(obj, i, kind) for i in range(first, count)}

@@ -16,8 +16,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import sympy as sp
 
+from ..constraints import MAX_CONSTRAINTS, MAX_ROW_ENTRIES, MAX_ROWS, Constraint
 from ..errors import InertiaWarning, ModelError, one_line, warn_user
 from ..manifest import FRICTION_WIDTH
+from .inputs import quote
 
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating")
 # A floating joint (Pinocchio's FreeFlyer) has 7 configuration entries, the position of its
@@ -213,11 +215,18 @@ class Model:
     source: str = "<model>"
     description: str = ""
     extra_frames: tuple[Frame, ...] = ()
+    # contacts and closed loops (gagen.constraints); a contact's anchor parameters are
+    # added (at 0) if missing: gagen.model.constraints.attach_constraints gives them the
+    # frame's neutral placement
+    constraints: tuple[Constraint, ...] = ()
 
     def __post_init__(self):
         object.__setattr__(self, "bodies", tuple(_tree_order(self.bodies, self.source)))
         object.__setattr__(self, "parameters", _with_friction_width(self.bodies,
                                                                     self.parameters))
+        object.__setattr__(self, "constraints", tuple(self.constraints))
+        object.__setattr__(self, "parameters", _with_anchors(self.constraints,
+                                                             self.parameters))
         _validate(self)
 
     @property
@@ -327,6 +336,7 @@ class Model:
             )
         lines += ["frame " + "|".join([f.name, f.body, f.kind, sp.srepr(f.xyz),
                                         sp.srepr(f.rotation)]) for f in self.extra_frames]
+        lines += ["constraint " + c.canonical() for c in self.constraints]
         return "\n".join(lines)
 
     def content_hash(self) -> str:
@@ -345,6 +355,14 @@ def _joint_terms_text(joint: Joint) -> list[str]:
 def has_friction(joint: Joint) -> bool:
     """Whether a joint's Coulomb friction is not structurally zero."""
     return joint.moves and not joint.floating and sp.sympify(joint.friction).is_zero is not True
+
+
+def _with_anchors(constraints, parameters) -> dict[str, float]:
+    """The parameters, with each contact's anchor parameters added at 0 where missing."""
+    missing = [name for c in constraints for name in c.anchor_names() if name not in parameters]
+    if not missing:
+        return parameters
+    return {**parameters, **dict.fromkeys(missing, 0.0)}
 
 
 def _with_friction_width(bodies, parameters) -> dict[str, float]:
@@ -466,6 +484,36 @@ def _validate(model: Model) -> None:
     if model.has_friction and float(params[FRICTION_WIDTH]) < 0:
         raise ModelError(src, f"parameter '{FRICTION_WIDTH}'",
                          "the width of the smoothed Coulomb friction must be >= 0")
+    _validate_constraints(model)
+
+
+def _validate_constraints(model: Model) -> None:
+    """Each constraint's frames are the model's, its name unique, and its rows within what
+    the compiled kernels hold (gagen.constraints's bounds)."""
+    if not model.constraints:
+        return
+    src = model.source
+    names = {f.name for f in model.frames}
+    seen: set[str] = set()
+    for c in model.constraints:
+        if not isinstance(c, Constraint):
+            raise ModelError(src, "constraints", f"expected gagen.constraints.Constraint "
+                             f"entries, got {type(c).__name__}")
+        where = f"constraint {quote(c.name)}"
+        if c.name in seen:
+            raise ModelError(src, where, "duplicate constraint name")
+        seen.add(c.name)
+        for frame in c.frames:
+            if frame not in names:
+                shown = ", ".join(sorted(names)[:12]) + (", ..." if len(names) > 12 else "")
+                raise ModelError(src, where, f"unknown frame {quote(frame)} (frames: "
+                                 f"{shown})")
+    count = len(model.constraints)
+    rows = sum(c.dimension for c in model.constraints)
+    if count > MAX_CONSTRAINTS or rows > MAX_ROWS or rows * model.nv > MAX_ROW_ENTRIES:
+        raise ModelError(src, "constraints", f"{count} constraints of {rows} rows on "
+                         f"{model.nv} coordinates; at most {MAX_CONSTRAINTS} constraints, "
+                         f"{MAX_ROWS} rows and {MAX_ROW_ENTRIES} rows x coordinates")
 
 
 def _check_joint_terms(joint: Joint, values: dict, source: str, element: str) -> None:

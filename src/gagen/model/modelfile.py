@@ -148,7 +148,8 @@ def _require(mapping: dict, key: str, source: str, element: str):
 
 
 def model_from_dict(data: dict, source: str) -> Model:
-    _check_keys(data, {"name", "gravity", "parameters", "bodies", "description"}, source, "")
+    _check_keys(data, {"name", "gravity", "parameters", "bodies", "description", "constraints"},
+                source, "")
     params = data.get("parameters") or {}
     if not isinstance(params, dict):
         raise ModelError(source, "parameters", "expected a mapping of name: default value")
@@ -176,8 +177,13 @@ def model_from_dict(data: dict, source: str) -> Model:
     description = data.get("description", "")
     if not isinstance(description, str):
         raise ModelError(source, "description", f"expected text, got {describe(description)}")
-    return Model(name=name, bodies=tuple(bodies), parameters=parameters, gravity=gravity,
-                 source=source, description=description)
+    model = Model(name=name, bodies=tuple(bodies), parameters=parameters, gravity=gravity,
+                  source=source, description=description)
+    if "constraints" in data:
+        from .constraints import attach_constraints
+
+        model = attach_constraints(model, data["constraints"])
+    return model
 
 
 def _body_from_dict(raw: Any, k: int, coordinate_index: int, parse: _ExprParser,

@@ -15,7 +15,7 @@ MJCF_SUFFIXES = (".xml", ".mjcf")
 
 
 def resolve_model(model: str | Path | Model, strict: bool = False,
-                  floating_base: bool = False) -> Model:
+                  floating_base: bool = False, constraints=None) -> Model:
     """A Model from a built-in name (`rrr`, `chain:N`), a model file, a URDF, an MJCF file
     (.xml, .mjcf: through MuJoCo's compiler, `pip install gagen[mjcf]`), or a Model.
 
@@ -23,8 +23,18 @@ def resolve_model(model: str | Path | Model, strict: bool = False,
     `gagen.errors.InertiaWarning`; `strict=True` refuses it (also in a Model given as is).
     `floating_base=True` lets a URDF's root link move freely (a floating joint to the
     world); model files and MJCF declare their floating joints themselves (`type: floating`,
-    `<freejoint/>`).
+    `<freejoint/>`). `constraints` (gagen.Contact, gagen.Loop or mappings, as a model
+    file's `constraints:` list) are added after the description's own.
     """
+    resolved = _resolve(model, strict, floating_base)
+    if constraints is None:
+        return resolved
+    from .constraints import attach_constraints
+
+    return attach_constraints(resolved, constraints)
+
+
+def _resolve(model, strict: bool, floating_base: bool) -> Model:
     if floating_base and not str(model).lower().endswith(".urdf"):
         raise ModelError(str(model), "floating_base", "floating_base=True applies to a URDF; "
                          "a model file declares a joint `type: floating`, an MJCF file a "

@@ -114,6 +114,33 @@ cdef extern from "gagen_api.h" nogil:
         int (*operational_space_inertia)(const double *q, const double *p, int count,
                                          const int *frames, int dims, double *work,
                                          double *Lambda) noexcept nogil
+        int nc, ncrows
+        int (*constraint_jacobian)(const double *q, const double *p,
+                                   const unsigned char *active, double *J) noexcept nogil
+        int (*constraint_drift)(const double *q, const double *qd, const double *p,
+                                const unsigned char *active, double *drift) noexcept nogil
+        int (*constraint_error)(const double *q, const double *p, const unsigned char *active,
+                                double *error) noexcept nogil
+        int (*constrained_forward_dynamics)(const double *q, const double *qd,
+                                            const double *tau, const double *p,
+                                            const unsigned char *active, double kp,
+                                            double kd, double damping, double *qdd,
+                                            double *forces) noexcept nogil
+        int (*impulse_dynamics)(const double *q, const double *qd_minus, const double *p,
+                                const unsigned char *active, double restitution,
+                                double damping, double *qd_plus,
+                                double *impulses) noexcept nogil
+        int (*simulate_constrained)(int method, const gagen_control *c, const double *p,
+                                    const unsigned char *active, double kp, double kd,
+                                    double damping, double t0, double t1, const double *y0,
+                                    double rtol, const double *atol, double first_step,
+                                    double max_step, long max_steps, double h,
+                                    const double *t_eval, int n_eval, double *y_out,
+                                    gagen_ode_stats *stats) noexcept nogil
+        int (*constrained_outputs)(const gagen_control *c, const double *p,
+                                   const unsigned char *active, double kp, double kd,
+                                   double damping, long m, const double *t, const double *y,
+                                   double *forces, double *errors) noexcept nogil
     ctypedef struct gagen_derivatives_api:
         int version
         const char *ident
@@ -176,6 +203,10 @@ cdef extern from *:
 # per state, 20 MB per 1000 states). Smaller outputs stay in the cache for the caller.
 STREAM_STATE = 256
 STREAM_BYTES = 4 << 20
+
+# the default Baumgarte gains of the constrained dynamics (no correction): a call that keeps
+# them skips their checks
+_NO_GAINS = (0.0, 0.0)
 
 MODEL_CAPSULE = "gagen.model_api"
 DERIVATIVES_CAPSULE = "gagen.derivatives_api"
@@ -443,9 +474,10 @@ cdef class CompiledModel(_Evaluator):
     cdef readonly object external_forces
     cdef dict _frame_numbers  # frame name -> number
     cdef object _frame_index  # (frame) -> number, or the error that names the choices
+    cdef object _constraints  # the per-call arguments' checks (runtime.constraints.Arguments)
 
     def __init__(self, capsule, parameter_vector, external_forces=None, quaternions=(),
-                 frame_numbers=None, frame_index=None):
+                 frame_numbers=None, frame_index=None, constraints=None):
         self.api = <const gagen_model_api *>_table(capsule, MODEL_CAPSULE)
         self._adopt(capsule, self.api.ident, self.api.np, self.api.err_nonfinite,
                     self.api.parameter_defaults)
@@ -454,6 +486,134 @@ cdef class CompiledModel(_Evaluator):
         self.external_forces = external_forces
         self._frame_numbers = dict(frame_numbers or {})
         self._frame_index = frame_index
+        self._constraints = constraints
+
+    # --- constraints (conventions: gagen.constraints; equations: gagen.runtime.constraints)
+
+    def constrained_forward_dynamics(self, q, qd, tau, active=None, baumgarte=_NO_GAINS,
+                                     fext=None, damping=0.0, p=None):
+        """(qdd, forces) of the constrained forward dynamics (Dynamics's documentation)."""
+        cdef const gagen_model_api *api = self.api
+        cdef double kp = 0.0, kd = 0.0, dmp = 0.0
+        cdef object mask = None
+        if active is not None:
+            mask = self._constraints.rows(active)[0]
+        if baumgarte is not _NO_GAINS:
+            kp, kd = self._constraints.gains(baumgarte)
+        if not (type(damping) is float and damping == 0.0):
+            dmp = self._constraints.damping(damping)
+        if fext is not None:
+            (q, tau), _ = as_states((api.nq, api.nv), q, tau, names=("q", "tau"))
+            tau = tau + self.external_forces(q, fext, p)
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef cnp.ndarray b = _state(qd, "qd", api.nv)
+        cdef cnp.ndarray c = _state(tau, "tau", api.nv)
+        cdef list keep = None if p is None else []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(c, _rows(b, _rows(a, -1, "q"), "qd"), "tau")
+        self._check_quaternions(a, rows, "q")
+        cdef cnp.ndarray qdd = _vectors(rows, api.nv)
+        cdef cnp.ndarray forces = _vectors(rows, api.ncrows)
+        cdef const unsigned char *act = NULL if mask is None \
+            else <const unsigned char *>cnp.PyArray_DATA(<cnp.ndarray>mask)
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *pc = _data(c)
+        cdef double *po = _data(qdd)
+        cdef double *pf = _data(forces)
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), sc = _step(c), i, failed = -1
+        cdef int nv = api.nv, nr = api.ncrows, code, status = 0
+        if rows < 0:  # one state: releasing the GIL would cost more than the kernel
+            status = api.constrained_forward_dynamics(pa_, pb, pc, pp, act, kp, kd, dmp, po, pf)
+        else:
+            with nogil:
+                for i in range(rows):
+                    code = api.constrained_forward_dynamics(pa_ + i * sa, pb + i * sb,
+                                                            pc + i * sc, pp, act, kp, kd, dmp,
+                                                            po + i * nv, pf + i * nr)
+                    if code != 0 and failed < 0:
+                        failed = i
+                        status = code
+        if status:
+            self._constraint_failure(status, failed if rows >= 0 else -1, a, mask, dmp, p)
+        return qdd, forces
+
+    def impulse_dynamics(self, q, qd_minus, active=None, restitution=0.0, damping=0.0,
+                         p=None):
+        """(qd_plus, impulses) at an impact (Dynamics's documentation)."""
+        cdef const gagen_model_api *api = self.api
+        mask, _, r, dmp = self._constraints.impulse_arguments(active, restitution, damping)
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef cnp.ndarray b = _state(qd_minus, "qd_minus", api.nv)
+        cdef list keep = None if p is None else []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(b, _rows(a, -1, "q"), "qd_minus")
+        self._check_quaternions(a, rows, "q")
+        cdef cnp.ndarray out = _vectors(rows, api.nv)
+        cdef cnp.ndarray impulses = _vectors(rows, api.ncrows)
+        cdef const unsigned char *act = NULL if mask is None \
+            else <const unsigned char *>cnp.PyArray_DATA(<cnp.ndarray>mask)
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *po = _data(out)
+        cdef double *pf = _data(impulses)
+        cdef double rr = r, dd = dmp
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), i, failed = -1
+        cdef Py_ssize_t count = rows if rows >= 0 else 1
+        cdef int nv = api.nv, nr = api.ncrows, code, status = 0
+        with nogil:
+            for i in range(count):
+                code = api.impulse_dynamics(pa_ + i * sa, pb + i * sb, pp, act, rr, dd,
+                                            po + i * nv, pf + i * nr)
+                if code != 0 and failed < 0:
+                    failed = i
+                    status = code
+        if status:
+            self._constraint_failure(status, failed if rows >= 0 else -1, a, mask, dd, p)
+        return out, impulses
+
+    def constraint_rows(self, int which, q, qd=None, active=None, p=None):
+        """The active constraints' Jacobian (which 0: (m, NV)), drift (1: (m,), at qd) or
+        position error (2: (m,)), at one state or stacked states."""
+        cdef const gagen_model_api *api = self.api
+        mask, m = self._constraints.rows(active)
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef cnp.ndarray b = _state(qd, "qd", api.nv) if which == 1 else a
+        cdef list keep = None if p is None else []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(a, -1, "q")
+        if which == 1:
+            rows = _rows(b, rows, "qd")
+        self._check_quaternions(a, rows, "q")
+        cdef Py_ssize_t nout = m * api.nv if which == 0 else m
+        cdef cnp.ndarray out = _matrices(rows, m, api.nv) if which == 0 else _vectors(rows, m)
+        cdef const unsigned char *act = NULL if mask is None \
+            else <const unsigned char *>cnp.PyArray_DATA(<cnp.ndarray>mask)
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *po = _data(out)
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), i
+        cdef Py_ssize_t count = rows if rows >= 0 else 1
+        with nogil:
+            for i in range(count):
+                if which == 0:
+                    api.constraint_jacobian(pa_ + i * sa, pp, act, po + i * nout)
+                elif which == 1:
+                    api.constraint_drift(pa_ + i * sa, pb + i * sb, pp, act, po + i * nout)
+                else:
+                    api.constraint_error(pa_ + i * sa, pp, act, po + i * nout)
+        return out
+
+    cdef _constraint_failure(self, int status, Py_ssize_t row, cnp.ndarray q, object mask,
+                             double damping, object p):
+        """Raise for a constrained kernel's failure at one state (row -1) or a stacked row:
+        M's errors as forward dynamics's, dependent rows naming them."""
+        if status == 1 or status == self.err_nonfinite:
+            self._failed(row, status, q)
+        if status == 4:
+            self._constraints.singular(q if row < 0 else q[row], mask, damping, row, p)
+        raise ValueError(f"the constrained dynamics of model '{self.ident}' refused its "
+                         f"arguments (status {status})")
 
     cdef object _run(self, Kernel kernel, Py_ssize_t nout, object x, object y, object z,
                      object p, str nx, str ny, str nz):
@@ -933,6 +1093,14 @@ cdef cnp.ndarray _frame_numbers(object frames, int nf):
     return fr
 
 
+def _constraint_mask(active, int nc):
+    """The active constraints as a fresh uint8 array of nc flags."""
+    mask = np.ascontiguousarray(active, dtype=np.uint8).ravel().copy()
+    if mask.size != nc:
+        raise ValueError(f"active must have {nc} flags, one per constraint; got {mask.size}")
+    return mask
+
+
 cdef int _method_code(str method) except -1:
     if method == "dopri5":
         return GAGEN_METHOD_DOPRI5
@@ -948,11 +1116,19 @@ cdef class CompiledSimulation:
     cdef gagen_control ctl
     cdef const double *p
     cdef object _keep
+    # a constrained run: the active constraints (one byte each), Baumgarte's gains, damping
+    cdef object _active
+    cdef double kp_c, kd_c, damping_c
 
     def __init__(self, CompiledModel model, p, int kind, kp=None, kd=None, target=None,
                  bint gravity_compensation=False, traj_q0=None, traj_qf=None,
-                 double traj_Tp=1.0, feedforward=None, frames=None, wrenches=None):
+                 double traj_Tp=1.0, feedforward=None, frames=None, wrenches=None,
+                 active=None, baumgarte=(0.0, 0.0), double damping=0.0):
         self.api = model.api
+        if active is not None:
+            self._active = _constraint_mask(active, self.api.nc)
+            self.kp_c, self.kd_c = (float(x) for x in baumgarte)
+            self.damping_c = damping
         cdef int nq = self.api.nq, nv = self.api.nv
         params = model._parameters(model.parameter_vector(None) if p is None else p)
         arrays = [params] + [None if v is None else _vector(v, size, name) for v, name, size in
@@ -1007,20 +1183,41 @@ cdef class CompiledSimulation:
         cdef Py_ssize_t i
         raised = []  # what a signal handler raised while the integrator ran (Ctrl-C)
         self.ctl.poll_ctx = <void *>raised
+        cdef bint held = self._active is not None
+        cdef const unsigned char *act = NULL
+        cdef double kc = self.kp_c, dc = self.kd_c, mu = self.damping_c
+        cdef cnp.ndarray forces = _matrix(m, api.ncrows), errors = _matrix(m, api.ncrows)
+        cdef double *pf = _data(forces)
+        cdef double *pe = _data(errors)
+        if held:
+            act = <const unsigned char *>cnp.PyArray_DATA(<cnp.ndarray>self._active)
         with nogil:
-            status = api.simulate(code, &self.ctl, self.p, t0, t1, py0, rtol, pat,
-                                  first_step, max_step, max_steps, h, pt, m, py, &stats)
+            if held:
+                status = api.simulate_constrained(code, &self.ctl, self.p, act, kc, dc, mu, t0,
+                                                  t1, py0, rtol, pat, first_step, max_step,
+                                                  max_steps, h, pt, m, py, &stats)
+            else:
+                status = api.simulate(code, &self.ctl, self.p, t0, t1, py0, rtol, pat,
+                                      first_step, max_step, max_steps, h, pt, m, py, &stats)
             _split_states(py, m, nq, nv, pq, pqd)
             if status == 0:  # the controller passed the integrator's checks: no new status
                 api.control_torques(&self.ctl, self.p, m, pt, py, ptau)
+                if held:
+                    api.constrained_outputs(&self.ctl, self.p, act, kc, dc, mu, m, pt, py, pf,
+                                            pe)
             else:
                 for i in range(m * nv):
                     ptau[i] = NAN
+                for i in range(m * api.ncrows):
+                    pf[i] = NAN
+                    pe[i] = NAN
         self.ctl.poll_ctx = NULL
         if raised:
             raise raised[0]
         info = {"nfev": stats.nfev, "nsteps": stats.nsteps, "naccepted": stats.naccepted,
                 "nrejected": stats.nrejected}
+        if held:
+            info["forces"], info["errors"] = forces, errors
         return q, qd, tau, status, info
 
     def torques(self, t, y):
@@ -1105,12 +1302,19 @@ cdef class CompiledBatch:
     cdef double *qd
     cdef double *tau
     cdef int64_t *stats
+    # a constrained batch: the active constraints, gains, damping, and where the forces and
+    # errors go ((N, m, rows) each)
+    cdef const unsigned char *active
+    cdef double kp_c, kd_c, damping_c
+    cdef double *forces
+    cdef double *errors
 
     def __init__(self, CompiledModel model, str method, double t0, double t1, t_eval,
                  double rtol, atol, double first_step, double max_step, long max_steps,
                  double h, y0, p, kind, gravity_compensation, kp, kd, target, traj_q0,
                  traj_qf, traj_Tp, q, qd, tau, stats, feedforward=None, frames=None,
-                 wrenches=None):
+                 wrenches=None, active=None, baumgarte=(0.0, 0.0), double damping=0.0,
+                 forces=None, errors=None):
         self.api = model.api
         self.code = _method_code(method)
         cdef int nq = self.api.nq, nv = self.api.nv, ny = nq + nv
@@ -1141,8 +1345,17 @@ cdef class CompiledBatch:
         cdef cnp.ndarray st = _runs_table(stats, N, 5, cnp.NPY_INT64, "stats")
         if st.shape[0] != N:
             raise ValueError(f"stats must have shape ({N}, 5)")
+        mask = None
+        if active is not None:
+            mask = _constraint_mask(active, self.api.nc)
+            self.active = <const unsigned char *>cnp.PyArray_DATA(<cnp.ndarray>mask)
+            self.kp_c, self.kd_c = (float(x) for x in baumgarte)
+            self.damping_c = damping
+            self.forces = _output(forces, N, self.m, self.api.ncrows, "forces")
+            self.errors = _output(errors, N, self.m, self.api.ncrows, "errors")
         # pointed into; the model keeps its table alive
-        self._keep = [te, y, pp, kd_, gc, tp, cs, q, qd, tau, st, fr, wr, at, model]
+        self._keep = [te, y, pp, kd_, gc, tp, cs, q, qd, tau, st, fr, wr, at, model, mask,
+                      forces, errors]
         self.t0, self.t1, self.rtol, self.h = t0, t1, rtol, h
         self.first_step, self.max_step, self.max_steps = first_step, max_step, max_steps
         self.at = _data(at)
@@ -1209,16 +1422,33 @@ cdef class CompiledBatch:
         ctl.poll = _poll_flag
         ctl.poll_ctx = <void *>&self.stop_flag
         st.nfev = st.nsteps = st.naccepted = st.nrejected = 0
-        cdef int status = self.api.simulate(self.code, &ctl, p, self.t0, self.t1,
-                                            self.y0 + i * self.y_step * (nq + nv), self.rtol,
-                                            self.at, self.first_step, self.max_step,
-                                            self.max_steps, self.h, self.te, m, y, &st)
+        cdef int status
+        cdef Py_ssize_t rows = self.api.ncrows
+        if self.active != NULL:
+            status = self.api.simulate_constrained(
+                self.code, &ctl, p, self.active, self.kp_c, self.kd_c, self.damping_c, self.t0,
+                self.t1, self.y0 + i * self.y_step * (nq + nv), self.rtol, self.at,
+                self.first_step, self.max_step, self.max_steps, self.h, self.te, m, y, &st)
+        else:
+            status = self.api.simulate(self.code, &ctl, p, self.t0, self.t1,
+                                       self.y0 + i * self.y_step * (nq + nv), self.rtol,
+                                       self.at, self.first_step, self.max_step,
+                                       self.max_steps, self.h, self.te, m, y, &st)
         _split_states(y, m, nq, nv, q, qd)
         if status == 0:
             self.api.control_torques(&ctl, p, m, self.te, y, tau)
+            if self.active != NULL:
+                self.api.constrained_outputs(&ctl, p, self.active, self.kp_c, self.kd_c,
+                                             self.damping_c, m, self.te, y,
+                                             self.forces + i * m * rows,
+                                             self.errors + i * m * rows)
         else:
             for k in range(m * nv):
                 tau[k] = NAN
+            if self.active != NULL:
+                for k in range(m * rows):
+                    self.forces[i * m * rows + k] = NAN
+                    self.errors[i * m * rows + k] = NAN
         cdef int64_t *s = self.stats + i * 5
         s[0] = status
         s[1] = st.nfev

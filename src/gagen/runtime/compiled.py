@@ -7,6 +7,7 @@ from functools import partial
 
 from ..errors import BuildError
 from ..manifest import ModelInfo
+from .constraints import Arguments
 from .dynamics import Dynamics
 from .frames import frame_index
 from .taskspace import singular_task, task_dims, task_frames
@@ -20,6 +21,8 @@ CENTROIDAL_METHODS = ("center_of_mass", "com_velocity", "com_jacobian", "centroi
 # the frames' methods, by name (gagen.runtime.taskspace has their conventions)
 FRAME_METHODS = ("frame_jacobian", "frame_velocity", "frame_acceleration",
                  "frame_bias_acceleration", "frame_jacobian_time_variation")
+# the constrained dynamics (constraints.c), bound like KERNEL_METHODS
+CONSTRAINED_METHODS = ("constrained_forward_dynamics", "impulse_dynamics")
 # the methods of a model's derivative module (codegen/derivatives.py), bound on first use
 DERIVATIVE_METHODS = ("inverse_dynamics_derivatives", "forward_dynamics_derivatives",
                       "coriolis_matrix", "linearize")
@@ -55,8 +58,9 @@ class CompiledDynamics(Dynamics):
         self.kernels = native().CompiledModel(module.API, self.parameter_vector,
                                               self.external_forces, self.info.quaternions(),
                                               self.info.frame_indices,
-                                              partial(frame_index, self.info))
-        for name in KERNEL_METHODS + CENTROIDAL_METHODS + FRAME_METHODS:
+                                              partial(frame_index, self.info),
+                                              Arguments(self))
+        for name in KERNEL_METHODS + CENTROIDAL_METHODS + FRAME_METHODS + CONSTRAINED_METHODS:
             setattr(self, name, getattr(self.kernels, name))
         self._frame_numbers = self.info.frame_indices
 
@@ -95,6 +99,20 @@ class CompiledDynamics(Dynamics):
             raise singular_task(self.info, indices, dims, row)
         return out
 
+    # constraints: the C of constraints.c.j2 (in frames.c); the dynamics are bound
+
+    def constraint_jacobian(self, q, active=None, p=None):
+        return self.kernels.constraint_rows(0, q, None, active, p)
+
+    def constraint_drift(self, q, qd, active=None, p=None):
+        return self.kernels.constraint_rows(1, q, qd, active, p)
+
+    def constraint_error(self, q, active=None, p=None):
+        return self.kernels.constraint_rows(2, q, None, active, p)
+
+    constraint_jacobian.__doc__ = Dynamics.constraint_jacobian.__doc__
+    constraint_drift.__doc__ = Dynamics.constraint_drift.__doc__
+    constraint_error.__doc__ = Dynamics.constraint_error.__doc__
     delassus.__doc__ = Dynamics.delassus.__doc__
     operational_space_inertia.__doc__ = Dynamics.operational_space_inertia.__doc__
 

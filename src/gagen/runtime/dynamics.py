@@ -35,9 +35,10 @@ class Dynamics:
         if model is None:
             from ..model.resolve import resolve_model
 
-            ref, floating_base = self._model_ref if isinstance(self._model_ref, tuple) \
-                else (self._model_ref, False)
-            model = self.__dict__["_model"] = resolve_model(ref, floating_base=floating_base)
+            ref, floating_base, constraints = (tuple(self._model_ref) + (None,))[:3] \
+                if isinstance(self._model_ref, tuple) else (self._model_ref, False, None)
+            model = self.__dict__["_model"] = resolve_model(ref, floating_base=floating_base,
+                                                            constraints=constraints)
         return model
 
     @property
@@ -273,6 +274,107 @@ class Dynamics:
         X, F, stacked = self._frame_data(q, p)
         wrenches = external_wrenches(self.info, fext, X.shape[0] if stacked else None)
         return generalized_forces(self.info, X, F, wrenches, self.nv)
+
+    # --- constraints: contacts and closed loops (gagen.constraints has the conventions,
+    # gagen.runtime.constraints the equations; the compiled backend binds its C) -----------
+
+    @property
+    def constraints(self) -> list:
+        """The model's constraints (`gagen.constraints.ConstraintInfo`): name, type ("contact"
+        or "loop"), frames, axes in the order of their rows, reference, dimension, and
+        `rows`, their slice of the stacked forces. Declared by the description (a model
+        file's `constraints:`, MJCF's `<equality connect/weld>`) or by
+        `gagen.load(..., constraints=[...])`."""
+        return list(self.info.constraint_infos)
+
+    def constraint_jacobian(self, q, active=None, p=None) -> np.ndarray:
+        """J, (m, nv) or (N, m, nv): the rows of the active constraints (`active`: None for
+        all, one boolean per constraint, or their names), stacked in declaration order;
+        J q̇ is their velocity (gagen.constraints: a point's or a frame's relative motion,
+        in each constraint's reference)."""
+        from .constraints import active_mask, constraint_rows
+
+        (q,), _ = as_states(self.nq, q, names=("q",))
+        check_quaternions(q, self._quaternions)
+        return constraint_rows(self, q, None, p, active_mask(self.info, active),
+                               drift=False)[0]
+
+    def constraint_drift(self, q, qd, active=None, p=None) -> np.ndarray:
+        """J̇ q̇ of the active rows, (m,) or (N, m): their acceleration at q̈ = 0 (a point's
+        classical acceleration, a frame's spatial one: gagen.constraints), so that the
+        constrained accelerations satisfy J q̈ + J̇ q̇ = 0."""
+        from .constraints import active_mask, constraint_rows
+
+        (q, qd), _ = as_states(self._sizes[:2], q, qd, names=("q", "qd"))
+        check_quaternions(q, self._quaternions)
+        return constraint_rows(self, q, qd, p, active_mask(self.info, active))[1]
+
+    def constraint_error(self, q, active=None, p=None) -> np.ndarray:
+        """The active rows' position error, (m,) or (N, m), in their axes (Pinocchio's
+        contact placement error): frame A's origin less frame B's (a contact's anchor), or
+        with a rotation axis −log₆ of B's placement in A's. Zero when the constraints hold;
+        what Baumgarte's kp multiplies."""
+        from .constraints import active_mask, constraint_rows
+
+        (q,), _ = as_states(self.nq, q, names=("q",))
+        check_quaternions(q, self._quaternions)
+        return constraint_rows(self, q, None, p, active_mask(self.info, active), drift=False,
+                               error=True)[2]
+
+    def constrained_forward_dynamics(self, q, qd, tau, active=None, baumgarte=(0.0, 0.0),
+                                     fext=None, damping=0.0, p=None) -> tuple:
+        """(q̈, forces): the accelerations and constraint forces of M q̈ = F(q, q̇, τ) + Jᵀ λ
+        with the active constraints held, J q̈ + J̇ q̇ = −kp e − kd J q̇ (the rigid KKT
+        solution; baumgarte = (kp, kd) as Pinocchio's corrector, e = constraint_error).
+        forces has every declared constraint's rows (`constraints[k].rows`), zero for the
+        inactive ones: the force (and moment) on frame A's body in the constraint's axes.
+        `fext` adds external wrenches as forward_dynamics does. Solved through M's factors
+        and the Delassus matrix J M⁻¹ Jᵀ (M is never inverted). SingularConstraintError
+        when the active rows are dependent, unless damping > 0: then (J M⁻¹ Jᵀ + damping I)
+        λ = ..., a damped solve (the constraints give way by damping · λ)."""
+        from .constraints import active_mask, baumgarte_gains, nonnegative, solve
+
+        kp, kd = baumgarte_gains(baumgarte)
+        mask = active_mask(self.info, active)
+        (q,), _ = as_states(self.nq, q, names=("q",))
+        check_quaternions(q, self._quaternions)
+        return solve(self, q, qd, tau, p, mask, kp, kd, nonnegative(damping, "damping"), fext)
+
+    def impulse_dynamics(self, q, qd_minus, active=None, restitution=0.0, damping=0.0,
+                         p=None) -> tuple:
+        """(q̇⁺, impulses) of an impact that sets the active constraints' velocity J q̇⁺ to
+        −restitution · J q̇⁻ (Pinocchio's impulseDynamics): M (q̇⁺ − q̇⁻) = Jᵀ Λ, impulses
+        laid out as constrained_forward_dynamics's forces. restitution in [0, 1]."""
+        from .constraints import active_mask, impulse, nonnegative
+
+        r = nonnegative(restitution, "restitution")
+        if r > 1.0:
+            raise ValueError(f"restitution must be in [0, 1]; got {r:g}")
+        mask = active_mask(self.info, active)
+        (q,), _ = as_states(self.nq, q, names=("q",))
+        check_quaternions(q, self._quaternions)
+        return impulse(self, q, qd_minus, p, mask, r, nonnegative(damping, "damping"))
+
+    def constrained_forward_dynamics_derivatives(self, q, qd, tau, active=None,
+                                                 baumgarte=(0.0, 0.0), damping=0.0,
+                                                 p=None) -> tuple:
+        """(∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂τ, ∂forces/∂q, ∂forces/∂q̇, ∂forces/∂τ) of
+        constrained_forward_dynamics(q, qd, tau, active, baumgarte, damping=damping): q̈'s
+        (nv, nv) each, the forces' (rows, nv) each over every declared row (zero for the
+        inactive constraints), or stacked (N, ...); ∂/∂q in the tangent space for floating
+        bases, as forward_dynamics_derivatives. Pinocchio's computeConstraintDynamicsDerivatives
+        (the same signs: forces on frame A's body). baumgarte's kp must be 0 (kd is
+        differentiated). Raises as constrained_forward_dynamics does."""
+        from .constraint_derivatives import derivatives
+        from .constraints import active_mask, baumgarte_gains, nonnegative
+
+        kp, kd = baumgarte_gains(baumgarte)
+        if kp:
+            raise ValueError("constrained_forward_dynamics_derivatives differentiates "
+                             "baumgarte's kd only; kp must be 0")
+        # q's shape and quaternions are checked by the constrained dynamics, called first
+        return derivatives(self, q, qd, tau, p, active_mask(self.info, active), kd,
+                           nonnegative(damping, "damping"))
 
     # --- centre of mass and centroidal dynamics (gagen.runtime.centroidal) ------------------
     # Pinocchio's conventions (centerOfMass, ccrba, dccrba): 6-vectors and the rows of 6 x nv

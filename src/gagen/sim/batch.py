@@ -26,12 +26,15 @@ from .simulate import (
     COMPILED_METHODS,
     SUCCESS_MESSAGE,
     CompiledSettings,
+    ConstraintSettings,
     SimulationResult,
     _pair,
     _vector,
+    anchored_parameters,
     checked_tolerances,
     compiled_settings,
     constant_wrenches,
+    constraint_settings,
     controller_spec,
     initial_configuration,
     nonfinite_origin,
@@ -61,7 +64,8 @@ class BatchPlan:
     y0 (N, nq + nv): each run's (q0, qd0); p (N or 1, P); control: the controllers' tables
     (kind, gravity_compensation, kp, kd, target, traj_q0, traj_qf, traj_Tp), N or 1 rows;
     offset: the index of the first run in the whole batch; wrenches: the constant external
-    wrenches every run shares, (frame numbers (k,), wrenches (k, 6)), or None.
+    wrenches every run shares, (frame numbers (k,), wrenches (k, 6)), or None;
+    constraints: a constrained batch's settings (simulate's), or None.
     """
 
     settings: CompiledSettings
@@ -70,6 +74,7 @@ class BatchPlan:
     control: dict[str, np.ndarray]
     offset: int = 0
     wrenches: tuple[np.ndarray, np.ndarray] | None = None
+    constraints: ConstraintSettings | None = None
 
     @property
     def runs(self) -> int:
@@ -82,15 +87,15 @@ class BatchPlan:
 
         return BatchPlan(self.settings, self.y0[start:stop], pick(self.p),
                          {k: pick(v) for k, v in self.control.items()}, self.offset + start,
-                         self.wrenches)
+                         self.wrenches, self.constraints)
 
 
 _CONTROL_VECTORS = ("kp", "kd", "target", "traj_q0", "traj_qf")
 
 
 def prepare_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: str = "dopri5",
-                  rtol: float = 1e-6, atol=1e-8, t_eval=None, fext=None,
-                  **options) -> BatchPlan:
+                  rtol: float = 1e-6, atol=1e-8, t_eval=None, fext=None, constraints=False,
+                  baumgarte=None, damping: float = 0.0, **options) -> BatchPlan:
     """Check a batch's inputs (the checks of `gagen.simulate`, per run) into a `BatchPlan`."""
     n, nq = dyn.nv, dyn.nq
     t0, t1 = _pair(t_span)
@@ -108,11 +113,16 @@ def prepare_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: st
     if nq != n:
         y0[:, :nq] = [initial_configuration(dyn, row) for row in y0[:, :nq]]
     table = _parameter_table(dyn, p, runs)
+    held = constraint_settings(dyn, constraints, baumgarte, damping)
+    if held is not None and (p is None or isinstance(p, Mapping)):
+        # each run's contacts anchored where its frames are at its q0 (unless p sets them)
+        table = np.array([anchored_parameters(dyn, table[min(k, len(table) - 1)], p,
+                                              y0[k, :nq], held) for k in range(runs)])
     specs = ([controller_spec(controller, method, n, "simulate_batch", dyn)]
              if controllers is None
              else [controller_spec(c, method, n, "simulate_batch", dyn) for c in controllers])
     return BatchPlan(settings, y0, table, _control_tables(specs, n, nq),
-                     wrenches=constant_wrenches(dyn, fext))
+                     wrenches=constant_wrenches(dyn, fext), constraints=held)
 
 
 def _controller_list(controller) -> list | None:
@@ -236,8 +246,10 @@ def default_threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def run_plan(dyn, plan: BatchPlan, threads: int = 1, progress: Progress | None = None):
-    """Run a plan here, over `threads` OS threads: (q, qd, tau, stats (N, 5) int64)."""
+def run_plan(dyn, plan: BatchPlan, threads: int = 1, progress: Progress | None = None,
+             outputs: dict | None = None):
+    """Run a plan here, over `threads` OS threads: (q, qd, tau, stats (N, 5) int64); a
+    constrained plan's forces and errors (N, m, rows) go into `outputs` if given."""
     s = plan.settings
     runs, m, n = plan.runs, s.t_eval.size, dyn.nv
     q = np.empty((runs, m, dyn.nq))
@@ -245,11 +257,20 @@ def run_plan(dyn, plan: BatchPlan, threads: int = 1, progress: Progress | None =
     stats = np.zeros((runs, 5), np.int64)
     c = plan.control
     frames, wrenches = plan.wrenches if plan.wrenches is not None else (None, None)
+    held = {}
+    if plan.constraints is not None:
+        rows = dyn.info.constraint_rows
+        forces, errors = np.empty((runs, m, rows)), np.empty((runs, m, rows))
+        held = {"active": plan.constraints.mask, "baumgarte": (plan.constraints.kp,
+                                                                plan.constraints.kd),
+                "damping": plan.constraints.damping, "forces": forces, "errors": errors}
+        if outputs is not None:
+            outputs.update(forces=forces, errors=errors)
     batch = native().CompiledBatch(
         dyn.kernels, s.method, s.t0, s.t1, s.t_eval, s.rtol, s.atol, s.first_step, s.max_step,
         s.max_steps, s.h, plan.y0, plan.p, c["kind"], c["gravity_compensation"], c["kp"],
         c["kd"], c["target"], c["traj_q0"], c["traj_qf"], c["traj_Tp"], q, qd, tau, stats,
-        frames=frames, wrenches=wrenches)
+        frames=frames, wrenches=wrenches, **held)
     _run_on_threads(batch, runs, threads, progress)
     return unit_quaternions(dyn, q.reshape(-1, dyn.nq)).reshape(q.shape), qd, tau, stats
 
@@ -331,6 +352,11 @@ class BatchResult:
     # the dynamics object and the parameter table (N or 1 rows) of the runs
     dyn: object = field(default=None, repr=False, compare=False)
     p: np.ndarray | None = field(default=None, repr=False, compare=False)
+    # a constrained batch: every declared constraint row's force and position error,
+    # (N, m, rows), 0 for the inactive ones; `constraint_rows` names them
+    constraint_forces: np.ndarray | None = None
+    constraint_error: np.ndarray | None = None
+    constraint_rows: list[str] | None = None
 
     def __len__(self) -> int:
         return len(self.status)
@@ -346,11 +372,16 @@ class BatchResult:
                  "nfev": int(self.nfev[i]), "steps": int(self.steps[i]),
                  "rejected": int(self.rejected[i]), "message": self.message[i]}
         nq = self.q.shape[-1]
+        held = {}
+        if self.constraint_rows is not None:
+            held = {"constraint_forces": np.array(self.constraint_forces[i]),
+                    "constraint_error": np.array(self.constraint_error[i]),
+                    "constraint_rows": list(self.constraint_rows)}
         return SimulationResult(self.t.copy(), np.array(self.q[i]), np.array(self.qd[i]),
                                 np.array(self.tau[i]), list(self.coordinates), stats,
                                 None if nq == len(self.coordinates) else
                                 list(getattr(self.dyn, "configuration", [])) or None,
-                                dyn=self.dyn, p=self._parameters(i))
+                                dyn=self.dyn, p=self._parameters(i), **held)
 
     def _parameters(self, i: int) -> np.ndarray | None:
         if self.p is None:
@@ -437,6 +468,7 @@ def simulate_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: s
                    rtol: float = 1e-6, atol=1e-8, t_eval=None, threads: int | None = None,
                    client=None, *, progress: Progress | None = None,
                    chunk_size: int | None = None, retries: int = 2, fext=None,
+                   constraints=False, baumgarte=None, damping: float = 0.0,
                    **options) -> BatchResult:
     """Run N simulations of `dyn` at once, in C, on every core or on a Dask cluster.
 
@@ -458,6 +490,10 @@ def simulate_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: s
     progress    called as progress(done, N) while the runs go on.
     fext        constant wrenches on frames, {frame: (fx, fy, fz, tx, ty, tz)} in world
                 axes at the frames' origins, the same for every run (as in `simulate`).
+    constraints, baumgarte, damping
+                the constrained dynamics, as in `simulate` (each run's contacts anchored at
+                its own q0 unless p sets the anchors); threads only (no client). The
+                result then holds the constraint forces and errors of every run.
     options     dopri5: first_step, max_step, max_steps; rk4: h, max_steps.
 
     Every run gives exactly the numbers `gagen.simulate(..., method=method)` gives for the
@@ -465,7 +501,10 @@ def simulate_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: s
     Ctrl-C stops every thread and raises KeyboardInterrupt. Returns a `BatchResult`.
     """
     plan = prepare_batch(dyn, t_span, q0, qd0, controller, p, method, rtol, atol, t_eval,
-                         fext, **options)
+                         fext, constraints, baumgarte, damping, **options)
+    if plan.constraints is not None and client is not None:
+        raise ValueError("a constrained batch runs on this machine's threads: pass "
+                         "client=None (Dask runs unconstrained batches)")
     return run_batch(dyn, plan, threads=threads, client=client, progress=progress,
                      chunk_size=chunk_size, retries=retries)
 
@@ -476,9 +515,10 @@ def run_batch(dyn, plan: BatchPlan, threads: int | None = None, client=None,
     """Run a checked plan here (threads) or on a Dask cluster (client)."""
     start = time.perf_counter()
     failures: dict[int, str] = {}
+    outputs: dict = {}
     if client is None:
         threads = default_threads() if threads is None else _positive_int(threads, "threads")
-        q, qd, tau, stats = run_plan(dyn, plan, threads, progress)
+        q, qd, tau, stats = run_plan(dyn, plan, threads, progress, outputs)
         chunks = None
     else:
         from .distributed import run_on_cluster
@@ -486,6 +526,11 @@ def run_batch(dyn, plan: BatchPlan, threads: int | None = None, client=None,
         q, qd, tau, stats, failures, chunks = run_on_cluster(
             client, dyn, plan, chunk_size=chunk_size, retries=retries, progress=progress)
     result = batch_result(dyn, plan, q, qd, tau, stats, failures)
+    if outputs:
+        from ..runtime.constraints import row_names
+
+        result.constraint_forces, result.constraint_error = outputs["forces"], outputs["errors"]
+        result.constraint_rows = row_names(dyn.info)
     result.stats.update(threads=threads, chunks=chunks, wall_time=time.perf_counter() - start)
     return result
 

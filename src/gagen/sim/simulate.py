@@ -22,6 +22,7 @@ import csv
 import functools
 import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -77,23 +78,46 @@ class SimulationResult:
     # to_html draws the robot with
     dyn: object = field(default=None, repr=False, compare=False)
     p: np.ndarray | None = field(default=None, repr=False, compare=False)
+    # a constrained run (constraints=...): per sample, every declared constraint row's force
+    # and position error (0 for the inactive ones); `constraint_rows` names them
+    constraint_forces: np.ndarray | None = None
+    constraint_error: np.ndarray | None = None
+    constraint_rows: list[str] | None = None
 
     @property
     def n(self) -> int:
         return self.qd.shape[1]
 
+    @property
+    def constraint_violation(self) -> np.ndarray | None:
+        """Per sample, the largest |position error| of the held constraints' rows (m,)."""
+        if self.constraint_error is None:
+            return None
+        if self.constraint_error.shape[1] == 0:
+            return np.zeros(len(self.t))
+        return np.abs(self.constraint_error).max(axis=1)
+
     def columns(self) -> list[str]:
-        """CSV header: t, q's entries, the rates (`<name>_d`), the torques (`tau_<name>`)."""
+        """CSV header: t, q's entries, the rates (`<name>_d`), the torques (`tau_<name>`);
+        in a constrained run then each constraint row's force (`force_<constraint>.<axis>`)
+        and position error (`error_<constraint>.<axis>`)."""
         c = self.coordinates
+        extra = [] if self.constraint_rows is None else \
+            [f"force_{r}" for r in self.constraint_rows] + \
+            [f"error_{r}" for r in self.constraint_rows]
         return (["t"] + list(self.configuration or c) + [f"{name}_d" for name in c]
-                + [f"tau_{name}" for name in c])
+                + [f"tau_{name}" for name in c] + extra)
 
     def to_csv(self, path) -> Path:
-        """Write t, q, qd, tau (one row per sample, SI units, radians) to a CSV file; a
-        name that a spreadsheet would take for a formula is escaped (gagen.csvtext)."""
+        """Write t, q, qd, tau (and a constrained run's forces and errors; one row per
+        sample, SI units, radians) to a CSV file; a name that a spreadsheet would take for
+        a formula is escaped (gagen.csvtext)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        data = np.column_stack([self.t, self.q, self.qd, self.tau])
+        parts = [self.t, self.q, self.qd, self.tau]
+        if self.constraint_rows is not None:
+            parts += [self.constraint_forces, self.constraint_error]
+        data = np.column_stack(parts)
         with path.open("w", newline="") as fh:
             writer = csv.writer(fh)
             writer.writerow([text_cell(name) for name in self.columns()])
@@ -197,8 +221,75 @@ def _python_controller(controller, n: int):
     return law
 
 
+# Baumgarte's gains of constrained simulations unless given: (kp, kd) = (w^2, 2 w) at
+# w = 20 rad/s, a drift critically damped within about 0.2 s
+DEFAULT_BAUMGARTE = (400.0, 40.0)
+
+
+@dataclass(frozen=True)
+class ConstraintSettings:
+    """A constrained run's checked settings: the active constraints (uint8, one per
+    constraint), Baumgarte's gains and the damping of the solve."""
+
+    mask: np.ndarray
+    kp: float
+    kd: float
+    damping: float
+
+    @property
+    def active(self) -> np.ndarray:
+        return self.mask.astype(bool)
+
+
+def constraint_settings(dyn, constraints, baumgarte, damping) -> ConstraintSettings | None:
+    """None for constraints=False or None; else the active set (True: every declared
+    constraint; or one boolean per constraint, or their names), the gains and the damping,
+    checked."""
+    from ..runtime.constraints import active_mask, baumgarte_gains, nonnegative
+
+    if constraints is None or constraints is False:
+        if baumgarte is not None or damping:
+            raise ValueError("baumgarte= and damping= apply to a constrained simulation: "
+                             "pass constraints=True")
+        return None
+    if not dyn.info.constraints:
+        raise ValueError(f"model '{dyn.info.name}' declares no constraints: load it with "
+                         "gagen.load(..., constraints=[gagen.Contact(...), ...]) or declare "
+                         "them in its description")
+    mask = active_mask(dyn.info, None if constraints is True else constraints)
+    kp, kd = baumgarte_gains(DEFAULT_BAUMGARTE if baumgarte is None else baumgarte)
+    return ConstraintSettings(mask.astype(np.uint8), kp, kd, nonnegative(damping, "damping"))
+
+
+def anchored_parameters(dyn, pvec: np.ndarray, p, q0: np.ndarray,
+                        settings: ConstraintSettings | None) -> np.ndarray:
+    """The run's parameters, each contact's anchor where its frame is at q0 unless `p` sets
+    it (a full array sets them all)."""
+    if settings is None or (p is not None and not isinstance(p, Mapping)):
+        return pvec
+    from ..constraints import anchor_parameter
+    from ..model.constraints import rpy_of
+
+    given = set(p or {})
+    names = list(dyn.parameters)
+    out = pvec.copy()
+    for c in dyn.info.constraints:
+        if c.type != "contact":
+            continue
+        R, origin = dyn.frame_placement(q0, c.frames[0], pvec)
+        values = dict(zip(("x", "y", "z"), origin))
+        if c.holds_frame:
+            values.update(zip(("roll", "pitch", "yaw"), rpy_of(R)))
+        for key, value in values.items():
+            name = anchor_parameter(c.name, key)
+            if name not in given:
+                out[names.index(name)] = value
+    return out
+
+
 def simulate(dyn, t_span, q0, qd0=None, controller=None, method: str = "RK45",
              rtol: float = 1e-6, atol=1e-8, t_eval=None, p=None, fext=None,
+             constraints=False, baumgarte=None, damping: float = 0.0,
              **options) -> SimulationResult:
     """Integrate the equations of motion of `dyn` over `t_span` from (q0, qd0).
 
@@ -227,6 +318,16 @@ def simulate(dyn, t_span, q0, qd0=None, controller=None, method: str = "RK45",
                 axes at the frames' origins (a support, a payload's weight): their
                 generalised force J(q)^T w acts with the controller's torques (tau reports
                 the controller's torques alone).
+    constraints True: integrate the constrained dynamics with every declared constraint
+                held (dyn.constrained_forward_dynamics; contacts, loops: `dyn.constraints`),
+                or the active ones: one boolean per constraint, or their names. False
+                (default): the unconstrained dynamics.
+    baumgarte   (kp, kd) of the constrained run's Baumgarte correction, which pulls the
+                position and velocity drift of the constraints back to zero (default
+                DEFAULT_BAUMGARTE = (400, 40)); a contact is held at its anchor, by default
+                where its frame is at q0 (p may set `anchor_<constraint>_x` ...).
+    damping     > 0: the constraint forces from a damped solve (dependent rows, e.g. a
+                loop through a singular configuration); 0: such rows are an error.
     options     scipy methods: passed on to solve_ivp (first_step, max_step, ...);
                 dopri5: first_step, max_step, max_steps; rk4: h.
 
@@ -235,24 +336,28 @@ def simulate(dyn, t_span, q0, qd0=None, controller=None, method: str = "RK45",
     steps through scipy). So does a ComputedTorque whose trajectory is not an
     Eq11Trajectory.
 
-    Returns a `SimulationResult` (fresh arrays). Raises `SingularMassMatrixError` if the
-    mass matrix becomes singular, RuntimeError naming the cause if the integration fails.
+    Returns a `SimulationResult` (fresh arrays; a constrained run's also holds the
+    constraint forces and position errors per sample, and stats["constraint_violation"],
+    their largest |error|). Raises `SingularMassMatrixError` if the mass matrix becomes
+    singular, `SingularConstraintError` if the held constraints' rows become dependent
+    (without damping), RuntimeError naming the cause if the integration fails.
     """
     t0, t1 = _pair(t_span)
     q0 = initial_configuration(dyn, _vector(q0, dyn.nq, "q0"))
     qd0 = _vector(qd0, dyn.nv, "qd0")
     rtol, atol_arr = checked_tolerances(method, rtol, atol, dyn.nq + dyn.nv)
-    pvec = dyn.parameter_vector(p)
+    held = constraint_settings(dyn, constraints, baumgarte, damping)
+    pvec = anchored_parameters(dyn, dyn.parameter_vector(p), p, q0, held)
     if controller is not None and not callable(controller):
         raise TypeError("controller must be None, a gagen controller or a callable "
                         "(t, q, qd) -> tau")
     wrenches = constant_wrenches(dyn, fext)
     if isinstance(method, str) and method in COMPILED_METHODS:
         result = _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol_arr,
-                                    t_eval, pvec, options, wrenches)
+                                    t_eval, pvec, options, wrenches, held)
     else:
         result = _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol_arr,
-                                 t_eval, pvec, options, wrenches)
+                                 t_eval, pvec, options, wrenches, held)
     result.dyn, result.p = dyn, pvec
     return result
 
@@ -318,7 +423,7 @@ def _pair(t_span):
 
 
 def _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval, pvec,
-                    options, wrenches=None) -> SimulationResult:
+                    options, wrenches=None, held=None) -> SimulationResult:
     from scipy.integrate import OdeSolver, solve_ivp
 
     if isinstance(method, type) and issubclass(method, OdeSolver):
@@ -344,7 +449,7 @@ def _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval
         law = _python_controller(controller, n)
         vectorised = None
     zero = np.zeros(n)
-    fd = dyn.forward_dynamics
+    fd = dyn.forward_dynamics if held is None else _constrained(dyn, held)
     rate = _configuration_rate(dyn)
     fext = None if wrenches is None else dict(zip(wrenches[0].tolist(), wrenches[1]))
     smoothing = smooth_friction(dyn, pvec)
@@ -398,18 +503,44 @@ def _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval
     else:
         tau = np.array([law(ti, qi, qdi) for ti, qi, qdi in zip(t, q, qd)],
                        dtype=float).reshape(len(t), n)
+    outputs = None
+    if held is not None:  # the forces the run had: its torques (the smooth friction's too)
+        applied = tau if smoothing is None else tau + smoothing(qd)
+        _, forces = dyn.constrained_forward_dynamics(
+            q, qd, applied, held.active, (held.kp, held.kd), fext, held.damping, pvec)
+        outputs = forces, dyn.constraint_error(q, held.active, pvec)
     wall = time.perf_counter() - start
     steps = len(sol.sol.ts) - 1 if sol.sol is not None else (0 if t0 == t1 else len(t) - 1)
     stats = {"method": name, "backend": dyn.backend, "nfev": int(sol.nfev),
              "steps": int(steps), "rejected": None, "njev": int(sol.njev),
              "nlu": int(sol.nlu), "wall_time": wall, "controller": _name(controller),
              "message": sol.message}
-    return _result(dyn, t, q, qd, tau, stats)
+    return _result(dyn, t, q, qd, tau, stats, held, outputs)
 
 
-def _result(dyn, t, q, qd, tau, stats) -> SimulationResult:
+def _constrained(dyn, held: ConstraintSettings):
+    """forward_dynamics's signature, for the constrained dynamics of a run."""
+    active, gains = held.active, (held.kp, held.kd)
+
+    def fd(q, qd, tau, p, fext=None):
+        return dyn.constrained_forward_dynamics(q, qd, tau, active, gains, fext, held.damping,
+                                                p)[0]
+    return fd
+
+
+def _result(dyn, t, q, qd, tau, stats, held=None, outputs=None) -> SimulationResult:
     configuration = None if dyn.nq == dyn.nv else list(dyn.configuration)
-    return SimulationResult(t, q, qd, tau, list(dyn.coordinates), stats, configuration)
+    result = SimulationResult(t, q, qd, tau, list(dyn.coordinates), stats, configuration)
+    if held is not None:
+        from ..runtime.constraints import active_rows, row_names
+
+        forces, error = outputs
+        full = np.zeros(error.shape[:-1] + (dyn.info.constraint_rows,))
+        full[..., active_rows(dyn.info, held.active)] = error
+        result.constraint_forces, result.constraint_error = forces, full
+        result.constraint_rows = row_names(dyn.info)
+        result.stats["constraint_violation"] = float(np.abs(full).max()) if full.size else 0.0
+    return result
 
 
 def _configuration_rate(dyn):
@@ -547,11 +678,13 @@ SUCCESS_MESSAGE = "The solver successfully reached the end of the integration in
 
 
 def _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval, pvec,
-                       options, wrenches=None) -> SimulationResult:
+                       options, wrenches=None, held=None) -> SimulationResult:
     settings = compiled_settings(dyn, method, t0, t1, rtol, atol, t_eval, options)
     spec = controller_spec(controller, method, dyn.n, dyn=dyn)
     if wrenches is not None:
         spec = {**spec, "frames": wrenches[0], "wrenches": wrenches[1]}
+    if held is not None:
+        spec = {**spec, **constrained_spec(held)}
     start = time.perf_counter()
     sim = native().CompiledSimulation(dyn.kernels, pvec, **spec)
     q, qd, tau, status, info = settings.run(sim, q0, qd0)
@@ -563,14 +696,29 @@ def _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_e
             tau0 = sim.torques(np.array([t0]), np.concatenate((q0, qd0))[None, :])[0][0]
             fext = None if wrenches is None else dict(zip(wrenches[0].tolist(), wrenches[1]))
             origin = nonfinite_origin(dyn, q0, qd0, pvec, tau0, fext)
-        raise status_error(status, method, te, q, dyn.info.name, origin)
+        raise status_error(status, method, te, q, dyn.info.name, origin, dyn, held)
     wall = time.perf_counter() - start
     stats = {"method": method, "backend": dyn.backend, "nfev": info["nfev"],
              "steps": info["naccepted"],
              "rejected": info["nrejected"] if method == "dopri5" else None,
              "wall_time": wall, "controller": _name(controller),
              "message": SUCCESS_MESSAGE}
-    return _result(dyn, te, q, qd, tau, stats)
+    outputs = None
+    if held is not None:
+        forces, errors = info["forces"], info["errors"]
+        outputs = forces, errors[:, _active_columns(dyn, held)]
+    return _result(dyn, te, q, qd, tau, stats, held, outputs)
+
+
+def constrained_spec(held: ConstraintSettings) -> dict:
+    """The keyword arguments of `CompiledSimulation` for a constrained run."""
+    return {"active": held.mask, "baumgarte": (held.kp, held.kd), "damping": held.damping}
+
+
+def _active_columns(dyn, held: ConstraintSettings) -> np.ndarray:
+    from ..runtime.constraints import active_rows
+
+    return active_rows(dyn.info, held.active)
 
 
 def _max_steps(value) -> int:
@@ -630,12 +778,24 @@ def _largest(values: np.ndarray, name: str, names: list[str]) -> str:
 
 
 def status_error(status: int, method: str, te, q, model_name: str,
-                 origin: str | None = None) -> Exception:
+                 origin: str | None = None, dyn=None, held=None) -> Exception:
     """The exception for a compiled integration's nonzero status, saying where it stopped
     (q holds NaN in the rows not reached) and, for NaN or inf, where it came from when the
     initial state was the cause (`origin`, from nonfinite_origin)."""
     reached = ~np.isnan(q).any(axis=1)
     where = f" after t = {te[reached][-1]:g}" if reached.any() else " before the first sample"
+    if status == 4:
+        from ..errors import SingularConstraintError
+
+        active, which = "", ""
+        if dyn is not None and held is not None:
+            active = " (" + ", ".join(repr(c.name) for c, on in
+                                      zip(dyn.info.constraints, held.active) if on) + ")"
+            which = _dependent_row(dyn, held, q[reached][-1] if reached.any() else None)
+        return SingularConstraintError(
+            f"{method}: the rows of the held constraints{active} of '{model_name}' became "
+            f"linearly dependent{where}{which} (a loop through a singular configuration, "
+            "redundant axes): declare fewer axes, or pass damping= (> 0) for a damped solve")
     if status in (2, -105) and origin:
         return NonFiniteStateError(f"{method} failed{where}: {origin}")
     if status == 1:
@@ -647,6 +807,24 @@ def status_error(status: int, method: str, te, q, model_name: str,
         return NonFiniteStateError(f"{method} failed{where}: {_NONFINITE}")
     cause = _STATUS.get(status, f"the model returned error code {status}")
     return RuntimeError(f"{method} failed{where}: {cause} (status {status})")
+
+
+def _dependent_row(dyn, held: ConstraintSettings, q) -> str:
+    """', row X is zero or depends on ...' when the held rows are dependent at q already."""
+    from ..errors import SingularConstraintError
+
+    if q is None:
+        return ""
+    zero = np.zeros(dyn.nv)
+    try:
+        dyn.constrained_forward_dynamics(q, zero, zero, held.active, damping=held.damping)
+    except SingularConstraintError as exc:
+        text = str(exc)
+        start = text.find(": row ")
+        return "" if start < 0 else ", at its last sample" + text[start + 1:text.find(" (", start)]
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return ""
+    return ""
 
 
 def inverse_dynamics_along(dyn, trajectory, t, p=None):

@@ -28,8 +28,8 @@ import sympy as sp
 from ..model.merge import merge_fixed_joints
 from .differentiate import needed_definitions, recorder_after
 from .gibbs_appell import Equations
-from .recursive import _links, _rotate_inertia, _symmetric, _unit_momenta
-from .vec3 import add, cross, mat_add, mat_mat, mat_neg, mat_scale, mat_vec, scale, skew, sub
+from .recursive import _links, _unit_momenta, composite_inertias
+from .vec3 import add, cross, mat_vec, scale, sub
 
 
 @dataclass
@@ -63,7 +63,7 @@ def centroidal_program(eqs: Equations) -> CentroidalProgram:
                   for link, (R, p) in zip(links, poses)))
     inverse_mass = rec.name(1 / mass)
     g = rec.named(scale(inverse_mass, first))
-    composite = _composites(links, rec)
+    composite = composite_inertias(links, rec)
     columns: dict[int, tuple] = {}
     for i, link in enumerate(links):
         R, p = poses[i]
@@ -85,26 +85,3 @@ def centroidal_program(eqs: Equations) -> CentroidalProgram:
                              placements={s: k for s, k in read.items() if s in used})
 
 
-def _composites(links, rec) -> list[tuple]:
-    """Per link, its subtree's (mass, first moment, inertia about O_i) in its frame: the
-    CRBA's backward pass (recursive._crba)."""
-    mass = [link.mass for link in links]
-    h = [link.h for link in links]
-    I_O = [link.I_O for link in links]
-    for i in reversed(range(len(links))):
-        link = links[i]
-        mass[i] = rec.name(mass[i])
-        h[i] = rec.named(h[i])
-        I_O[i] = _symmetric(I_O[i], rec)
-        p = link.parent
-        if p is None:
-            continue
-        h_up = link.to_parent(h[i], rec)
-        I_up = _rotate_inertia(link.R, I_O[i], rec)
-        d = skew(link.d)
-        mass[p] = mass[p] + mass[i]
-        h[p] = add(h[p], h_up, scale(mass[i], link.d))
-        H = skew(h_up)
-        I_O[p] = mat_add(I_O[p], I_up, mat_neg(mat_mat(H, d)), mat_neg(mat_mat(d, H)),
-                         mat_neg(mat_mat(mat_scale(mass[i], d), d)))
-    return list(zip(mass, h, I_O))

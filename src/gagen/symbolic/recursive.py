@@ -323,16 +323,10 @@ def _velocity_wrench(link: Link, w: Vec3, rec: Recorder) -> tuple[Terms, Terms]:
             cross_terms(w, rec.named(mat_vec(link.I_O, w))))
 
 
-def _crba(links: list[Link], n: int, rec: Recorder) -> sp.Matrix:
-    """The mass matrix by the composite-rigid-body algorithm.
-
-    Backward, each body's composite inertia (mass, first moment, inertia about O_i) gathers
-    its children's, moved into its frame. Then for each joint i the composite's momentum
-    for a unit rate of joint i (a spatial force) is carried to each ancestor joint j, where
-    its projection on j's axis is M_ij. (Expressing every inertia and motion subspace once
-    in a common frame, so that M_ij is one 6-dot product, measured slower: the local
-    frames keep the joints' sparse rotations, and Talos's M took 4.2 us instead of 2.3.)
-    """
+def composite_inertias(links: list[Link], rec: Recorder) -> list[tuple]:
+    """Per link, its subtree's (mass, first moment, inertia about O_i) in its own frame, each
+    named: the CRBA's backward pass, each body's gathering its children's, moved into its
+    frame (also the centroidal map's)."""
     mass = [link.mass for link in links]
     h = [link.h for link in links]
     I_O = [link.I_O for link in links]
@@ -353,6 +347,20 @@ def _crba(links: list[Link], n: int, rec: Recorder) -> sp.Matrix:
         H = skew(h_up)
         I_O[p] = mat_add(I_O[p], I_up, mat_neg(mat_mat(H, d)), mat_neg(mat_mat(d, H)),
                          mat_neg(mat_mat(mat_scale(mass[i], d), d)))
+    return list(zip(mass, h, I_O))
+
+
+def _crba(links: list[Link], n: int, rec: Recorder) -> sp.Matrix:
+    """The mass matrix by the composite-rigid-body algorithm.
+
+    Backward, each body's composite inertia (mass, first moment, inertia about O_i) gathers
+    its children's, moved into its frame. Then for each joint i the composite's momentum
+    for a unit rate of joint i (a spatial force) is carried to each ancestor joint j, where
+    its projection on j's axis is M_ij. (Expressing every inertia and motion subspace once
+    in a common frame, so that M_ij is one 6-dot product, measured slower: the local
+    frames keep the joints' sparse rotations, and Talos's M took 4.2 us instead of 2.3.)
+    """
+    mass, h, I_O = zip(*composite_inertias(links, rec))
     M = sp.zeros(n, n)
     for i, link in enumerate(links):
         for column, (f, m_) in _unit_momenta(link, mass[i], h[i], I_O[i], rec):

@@ -12,6 +12,11 @@ since November 2021 (0.3.2); viser is maintained and is also the live viewer
 The file is written by building the robot in a viser server bound to 127.0.0.1 (on a free
 port, no client ever connects), recording a pose message per moving body per sample,
 then the page; nothing is written until the page is complete (a temporary file renamed).
+
+The page is made to draw its first frame soon in a browser without a GPU too (software
+WebGL, such as headless Chromium's SwiftShader), where every pixel costs CPU time: lights
+instead of viser's environment map (`add_lights`), no shadow maps, and textures no finer
+than the opening view shows (`texels_per_metre`).
 """
 
 from __future__ import annotations
@@ -33,6 +38,9 @@ MAX_FRAMES = 20_000  # samples a file plays (all runs together); more are thinne
 MAX_RUNS = 100  # runs of a sweep in one file
 GHOST_ALPHA = 0.3  # opacity of the overlaid runs after the first
 MODES = ("overlay", "sequence")
+# The opening view is sized for a full-HD screen: textures keep at least a texel per pixel
+# of a window this many pixels high on the surfaces they cover (texels_per_metre).
+SCREEN_PIXELS = 1080
 
 
 def write_html(path, dyn, t, q, p=None, *, package_dirs=None, mode: str = "overlay",
@@ -116,15 +124,17 @@ def _thinned(m: int, frames: int) -> np.ndarray:
 def _recording(dyn, visuals, t, runs, params, mode: str, labels) -> str:
     """The page: the robots built in a private server, their motion recorded."""
     with quiet_server() as server:
-        library = MeshLibrary(visuals)
+        view = opening_view(dyn, runs[0][0], params[0])
+        library = MeshLibrary(visuals, texels_per_metre=texels_per_metre(server, view))
         several = len(runs) > 1
         scenes = [RobotScene(server.scene, dyn, visuals, library,
                              prefix=f"/gagen/run_{k}" if several else "/gagen", p=params[k],
                              ghost=GHOST_ALPHA if several and mode == "overlay" and k else None,
                              q0=run[0])
                   for k, run in enumerate(runs)]
-        aim_camera(server, scenes[0], runs[0][0])
+        aim_camera(server, view)
         add_ground(server, scenes[0], runs[0][0])
+        add_lights(server)
         if mode == "sequence" and several:
             _label_runs(server, scenes, runs, labels)
         serializer = server.get_scene_serializer()
@@ -178,16 +188,62 @@ def add_ground(server, scene: RobotScene, q) -> None:
                           plane="xy")
 
 
-def aim_camera(server, scene: RobotScene, q) -> None:
-    """Look at the robot in configuration q from the front, right and above."""
-    origin, _ = scene.pose_arrays(np.atleast_2d(q))
+def opening_view(dyn, q, p=None) -> tuple[np.ndarray, np.ndarray]:
+    """(camera position, point looked at): the robot in configuration q seen from the
+    front, right and above, all of its bodies in view."""
+    from .placements import body_placements
+
+    _, origin = body_placements(dyn, np.atleast_2d(q), p)
     points = origin[0]
     centre = (points.max(axis=0) + points.min(axis=0)) / 2
     radius = max(float(np.linalg.norm(points - centre, axis=1).max()) + 0.15, 0.3)
     direction = np.array([1.3, -1.6, 0.9])
     direction /= np.linalg.norm(direction)
-    server.initial_camera.look_at = tuple(float(v) for v in centre)
-    server.initial_camera.position = tuple(float(v) for v in centre + 2.2 * radius * direction)
+    return centre + 2.2 * radius * direction, centre
+
+
+def aim_camera(server, view: tuple[np.ndarray, np.ndarray]) -> None:
+    """Open the page on `view` (opening_view)."""
+    position, look_at = view
+    server.initial_camera.look_at = tuple(float(v) for v in look_at)
+    server.initial_camera.position = tuple(float(v) for v in position)
+
+
+def texels_per_metre(server, view: tuple[np.ndarray, np.ndarray]) -> float:
+    """The texture density that gives a texel per pixel, in the opening view of a window
+    SCREEN_PIXELS high, on a surface at the point looked at: textures finer than this
+    only cost the page time (a browser without a GPU decodes them and builds their
+    mipmaps on the CPU before the first frame), and they stay sharp to a zoom of 1-2x (the
+    edges are rounded up to powers of two)."""
+    position, look_at = view
+    distance = float(np.linalg.norm(np.asarray(position) - np.asarray(look_at)))
+    height = 2.0 * distance * math.tan(server.initial_camera.fov / 2.0)  # metres in view
+    return SCREEN_PIXELS / height
+
+
+def add_lights(server) -> None:
+    """Light the robot without an environment map and without shadows.
+
+    viser's default light is an HDR environment map (a city panorama) with a shadow-casting
+    key light. In a browser without a GPU, prefiltering that map (three.js's PMREM) is
+    most of the time to the first frame: ANYmal C's 10-s playback in headless Chromium
+    drew its first frame after 12.2 s with the map and 2.7 s with these lights (load
+    average 9 on 2 cores), and the default lights' shadow maps cost another 1.2 s.
+    Robots' materials are mostly diffuse (a mesh file's colours, roughness 1), on which a
+    panorama's light is close to a hemisphere light (sky above, ground below); these
+    lights were chosen to look like viser's default on ANYmal C (screenshots side by
+    side): viser's two directional lights, a hemisphere light, and a fill light from the
+    right of the opening view, where the panorama is brightest."""
+    scene = server.scene
+    scene.configure_environment_map(None)
+    scene.configure_default_lights(enabled=False, cast_shadow=False)
+    # viser's default lights (given in three.js's y-up axes there), here in the world's z-up
+    scene.add_light_directional("/lights/key", intensity=3.0, position=(-0.2, 0.2, 1.0))
+    scene.add_light_directional("/lights/below", intensity=0.4, position=(0.0, 0.0, -1.0))
+    scene.add_light_directional("/lights/fill", intensity=1.5, position=(1.6, 1.3, 1.5))
+    scene.add_light_hemisphere("/lights/sky", sky_color=(217, 236, 255),
+                               ground_color=(38, 38, 38), intensity=4.5,
+                               position=(0.0, 0.0, 1.0))
 
 
 class PoseRecorder:

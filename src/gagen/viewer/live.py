@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from .html import add_ground, aim_camera
+from .html import add_ground, add_lights, aim_camera, opening_view, texels_per_metre
 from .placements import wxyz
 from .scene import MeshLibrary, RobotScene
 from .visuals import robot_visuals, rotation_rpy
@@ -47,9 +47,12 @@ class LiveViewer:
         self._lock = threading.RLock()
         self._stopped = threading.Event()
         scene = self.server.scene
-        self.robot = RobotScene(scene, dyn, visuals, MeshLibrary(visuals), p=self.p, q0=self.q)
+        view = opening_view(dyn, self.q, self.p)
+        library = MeshLibrary(visuals, texels_per_metre=texels_per_metre(self.server, view))
+        self.robot = RobotScene(scene, dyn, visuals, library, p=self.p, q0=self.q)
         add_ground(self.server, self.robot, self.q)
-        aim_camera(self.server, self.robot, self.q)
+        aim_camera(self.server, view)
+        add_lights(self.server)
         self._frames = None
         self.sliders = self._joint_sliders()
         self._frames_switch()

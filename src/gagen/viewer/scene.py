@@ -8,9 +8,14 @@ reach the page as anything but text):
     /gagen[/run_K]/<body>/<link>/visual_N a visual, placed in its link as described
     /gagen[/run_K]/world/<link>           links welded to the world, and world geoms
 
-Meshes become binary glTF (GLB) through trimesh, with their materials; textures are
-scaled down to MAX_TEXTURE_EDGE pixels (the file embeds them). A ghost (overlaid sweep
-runs) is the same robot with translucent materials.
+Meshes become binary glTF (GLB) through trimesh, with their materials. Textures are scaled
+down to what the opening view shows (`MeshLibrary.texels_per_metre`: about a texel per
+screen pixel on the surfaces they cover) and at most MAX_TEXTURE_EDGE pixels: the file
+embeds them, and a browser without a GPU decodes them and builds their mipmaps on the CPU
+before the first frame (ANYmal C's 19 textures all at 1024 pixels instead: 3.40 MB instead
+of 2.79 MB, and the first frame about 0.7 s later in headless Chromium; see
+benchmarks/viewer_first_frame.py). A ghost (overlaid sweep runs) is the same robot with
+translucent materials.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from .visuals import DEFAULT_RGBA, MeshWarning, RobotVisuals, Visual
 log = logging.getLogger(__name__)
 
 MAX_TEXTURE_EDGE = 1024  # pixels; ANYmal C's textures are 2048 x 2048 JPEGs
+MIN_TEXTURE_EDGE = 32
 ROOT = "/gagen"
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.\-]")
 
@@ -81,6 +87,8 @@ class MeshLibrary:
     """Each visual's GLB, mesh files read once; refusals become MeshWarnings."""
 
     visuals: RobotVisuals
+    # the surface density textures are scaled down to (None: MAX_TEXTURE_EDGE only)
+    texels_per_metre: float | None = None
     budget: MeshBudget = field(default_factory=MeshBudget)
     _meshes: dict = field(default_factory=dict)  # uri -> trimesh.Scene or MeshRefused
     _glb: dict = field(default_factory=dict)
@@ -109,10 +117,12 @@ class MeshLibrary:
 
     def _glb_of(self, visual: Visual, ghost: float | None) -> bytes:
         shape = visual.shape
-        key = (shape.kind, shape.uri, shape.size, id(shape.vertices), visual.rgba, ghost)
+        key = (shape.kind, shape.uri, shape.size, shape.scale, id(shape.vertices), visual.rgba,
+               ghost)
         if key not in self._glb:
             scene = self._mesh(shape.uri) if shape.kind == "mesh" else _primitive(visual)
-            self._glb[key] = _export(scene, visual.rgba, ghost, self._textures)
+            edges = texture_edges(scene, shape.scale, self.texels_per_metre)
+            self._glb[key] = _export(scene, visual.rgba, ghost, self._textures, edges)
         return self._glb[key]
 
     def _mesh(self, uri: str):
@@ -156,9 +166,66 @@ def _primitive(visual: Visual):
     return trimesh.Scene(mesh)
 
 
-def _export(scene, rgba, ghost: float | None, textures: dict) -> bytes:
+def texture_edges(scene, scale=(1.0, 1.0, 1.0), texels_per_metre: float | None = None
+                  ) -> dict[int, int]:
+    """id(image) -> the longest edge, in pixels, that each base-colour texture of a mesh
+    (a trimesh.Scene, drawn at `scale`) is scaled down to: the smallest power of two that
+    gives `texels_per_metre` on average over the surfaces it covers (their area in the
+    texture's UV square against their area in metres), within MIN_TEXTURE_EDGE and
+    MAX_TEXTURE_EDGE; MAX_TEXTURE_EDGE for every texture when texels_per_metre is None."""
+    edges: dict[int, int] = {}
+    for node in scene.graph.nodes_geometry:
+        transform, name = scene.graph[node]
+        geometry = scene.geometry.get(name)
+        image, uv = _texture_of(geometry)
+        if image is None:
+            continue
+        edge = MAX_TEXTURE_EDGE
+        if texels_per_metre is not None:
+            edge = _edge_for(geometry, uv, transform, scale, texels_per_metre)
+        edges[id(image)] = max(edges.get(id(image), 0), edge)
+    return edges
+
+
+def _texture_of(geometry) -> tuple:
+    """(base-colour image, per-vertex UV) of a textured triangle mesh, else (None, None)."""
+    visual = getattr(geometry, "visual", None)
+    if getattr(visual, "kind", None) != "texture" or getattr(visual, "uv", None) is None:
+        return None, None
+    material = visual.material
+    image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
+    uv = np.asarray(visual.uv, dtype=float)
+    if image is None or uv.ndim != 2 or uv.shape[0] != len(geometry.vertices) or \
+            uv.shape[1] < 2:
+        return None, None
+    return image, uv[:, :2]
+
+
+def _edge_for(geometry, uv, transform, scale, texels_per_metre: float) -> int:
+    faces = np.asarray(geometry.faces)
+    vertices = np.asarray(geometry.vertices, dtype=float) @ np.asarray(transform)[:3, :3].T
+    vertices = vertices * np.asarray(scale, dtype=float)
+    surface = _areas(vertices[faces]).sum()
+    covered = _areas(uv[faces]).sum()  # a fraction of the texture (more where it repeats)
+    if not (np.isfinite(surface) and np.isfinite(covered) and surface > 0 and covered > 0):
+        return MIN_TEXTURE_EDGE  # no surface to cover, or one texel stretched over it
+    pixels = texels_per_metre * math.sqrt(surface / covered)
+    edge = 2 ** math.ceil(math.log2(max(pixels, 1.0)))
+    return int(min(MAX_TEXTURE_EDGE, max(MIN_TEXTURE_EDGE, edge)))
+
+
+def _areas(triangles: np.ndarray) -> np.ndarray:
+    """Areas of triangles (F, 3, 2) or (F, 3, 3)."""
+    a, b = triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
+    if triangles.shape[-1] == 2:
+        return np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) / 2
+    return np.linalg.norm(np.cross(a, b), axis=1) / 2
+
+
+def _export(scene, rgba, ghost: float | None, textures: dict, edges: dict) -> bytes:
     """The scene as GLB: the description's colour where the mesh has none, textures scaled
-    down, translucent for a ghost (the scene itself is left as it is)."""
+    down to `edges` (texture_edges), translucent for a ghost (the scene itself is left as
+    it is)."""
     import trimesh
 
     # The mesh file's own names (of nodes, meshes, materials) stay out of the page: the
@@ -171,7 +238,7 @@ def _export(scene, rgba, ghost: float | None, textures: dict) -> bytes:
         if not isinstance(geometry, trimesh.Trimesh) or len(geometry.faces) == 0:
             continue
         if name not in made:
-            material = _material(geometry, rgba, textures)
+            material = _material(geometry, rgba, textures, edges)
             if ghost is not None:
                 material = _ghosted(material, ghost)
             material.name = f"material{len(made)}"
@@ -185,7 +252,7 @@ def _export(scene, rgba, ghost: float | None, textures: dict) -> bytes:
     return out.export(file_type="glb")
 
 
-def _material(geometry, rgba, textures: dict):
+def _material(geometry, rgba, textures: dict, edges: dict):
     """The geometry's own material (textures scaled down); the description's colour
     `rgba` where the mesh has no colour of its own (no texture, white or no material);
     DEFAULT_RGBA where neither has one."""
@@ -196,8 +263,10 @@ def _material(geometry, rgba, textures: dict):
     if visual.kind == "texture" and material is not None:
         material = material.to_pbr() if hasattr(material, "to_pbr") else material
         material = copy.copy(material)  # (a shallow copy: the texture is not copied)
-        if getattr(material, "baseColorTexture", None) is not None:
-            material.baseColorTexture = _smaller(material.baseColorTexture, textures)
+        image = getattr(material, "baseColorTexture", None)
+        if image is not None:
+            material.baseColorTexture = _smaller(image, textures,
+                                                 edges.get(id(image), MAX_TEXTURE_EDGE))
         for attribute in ("emissiveTexture", "normalTexture", "metallicRoughnessTexture",
                           "occlusionTexture"):
             if getattr(material, attribute, None) is not None:
@@ -243,15 +312,15 @@ def _visual_with(geometry, material):
     return trimesh.visual.TextureVisuals(uv=uv, material=material)
 
 
-def _smaller(image, textures: dict):
-    """The texture at most MAX_TEXTURE_EDGE pixels on a side, JPEG unless it has alpha."""
+def _smaller(image, textures: dict, edge: int):
+    """The texture at most `edge` pixels on a side, JPEG unless it has alpha."""
     from PIL import Image
 
-    key = id(image)
+    key = (id(image), edge)
     if key not in textures:
         smaller = image
-        if max(image.size) > MAX_TEXTURE_EDGE:  # box-filtered by a whole factor: fast
-            smaller = image.reduce(math.ceil(max(image.size) / MAX_TEXTURE_EDGE))
+        if max(image.size) > edge:  # box-filtered by a whole factor: fast
+            smaller = image.reduce(math.ceil(max(image.size) / edge))
         if smaller.mode in ("RGB", "L") and (smaller is not image or image.format != "JPEG"):
             buffer = io.BytesIO()
             smaller.convert("RGB").save(buffer, format="JPEG", quality=85)
@@ -312,7 +381,7 @@ class RobotScene:
             scene.add_glb(f"{parent}/visual_{k}", glb, scale=tuple(visual.shape.scale),
                           position=tuple(float(v) for v in visual.p),
                           wxyz=tuple(float(v) for v in wxyz(visual.R)),
-                          cast_shadow=ghost is None, receive_shadow=ghost is None)
+                          cast_shadow=False, receive_shadow=False)  # see add_lights
             drawn += 1
         return drawn
 

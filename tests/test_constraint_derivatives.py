@@ -1,0 +1,275 @@
+"""The derivatives of the constrained forward dynamics (issue 26, item 4).
+
+References: Pinocchio 4.1's computeConstraintDynamicsDerivatives (after constraintDynamics,
+ProximalSettings with mu = 0) to 1e-9 relative on ANYmal C (every subset of its feet as
+3-D contacts, both references, 6-D feet, 3-D and 6-D loops in both references, Baumgarte's
+kd) and on random branched floating trees (both backends); central differences of
+constrained_forward_dynamics along dyn.integrate for what Pinocchio does not have (any
+subset of axes, a damped solve) and for the planar four-bar's loop (both backends).
+"""
+
+from __future__ import annotations
+
+import itertools
+import warnings
+
+import numpy as np
+import pytest
+from test_constraints import (
+    ANYMAL_CONSTRAINTS,
+    RTOL,
+    URDF,
+    PinConstraints,
+    close,
+    closed_fourbar,
+    conditioned_state,
+    fourbar,
+    load_tree,
+    mask,
+    rows_of,
+    standing,
+)
+from test_floating import random_state
+
+import gagen
+from gagen.model.numeric import numeric_model
+from gagen.reference.pinocchio import pinocchio_model
+
+NAMES = ("dqdd_dq", "dqdd_dqd", "dqdd_dtau", "dforces_dq", "dforces_dqd", "dforces_dtau")
+
+
+def pinocchio_derivatives(ref: PinConstraints, names, q, v, tau, kd=0.0):
+    """Pinocchio's six derivatives in gagen's coordinates (λ's rows: the named ones)."""
+    pin, twin = ref.pin, ref.twin
+    models, datas = ref._models(names, 0.0, kd)
+    settings = pin.ProximalSettings(1e-14, 0.0, 1)
+    pin.constraintDynamics(ref.model, ref.data, twin.q(q), twin.v(v), twin.v(tau), models,
+                           datas, settings)
+    pin.computeConstraintDynamicsDerivatives(ref.model, ref.data, models, datas, settings)
+    d, vi = ref.data, twin.v_index
+    return (d.ddq_dq[np.ix_(vi, vi)], d.ddq_dv[np.ix_(vi, vi)], d.ddq_dtau[np.ix_(vi, vi)],
+            d.dlambda_dq[:, vi], d.dlambda_dv[:, vi], d.dlambda_dtau[:, vi])
+
+
+def check_against_pinocchio(dyn, ref, names, q, v, tau, kd=0.0, rtol=RTOL):
+    ours = dyn.constrained_forward_dynamics_derivatives(q, v, tau, mask(dyn, *names),
+                                                        baumgarte=(0.0, kd))
+    theirs = pinocchio_derivatives(ref, names, q, v, tau, kd)
+    rows = rows_of(dyn, names)
+    inactive = np.setdiff1d(np.arange(dyn.info.constraint_rows), rows)
+    for name, x, y in zip(NAMES, ours, theirs):
+        if name.startswith("dforces"):
+            assert np.all(x[inactive] == 0.0), f"{name}: the inactive rows are zero"
+            x = x[rows]
+        close(x, y, f"{name} of {dyn.info.name} {', '.join(names)} (kd {kd})", rtol)
+
+
+def central_differences(dyn, q, v, tau, on, h=1e-6, **options):
+    """The six derivatives by central differences of constrained_forward_dynamics, q moved
+    along dyn.integrate (the tangent space)."""
+    def f(q, v, tau):
+        qdd, forces = dyn.constrained_forward_dynamics(q, v, tau, on, **options)
+        return np.concatenate([qdd, forces])
+    nv = dyn.nv
+    cols = {"q": [], "v": [], "tau": []}
+    for k in range(nv):
+        e = np.zeros(nv)
+        e[k] = h
+        cols["q"].append((f(dyn.integrate(q, e), v, tau) - f(dyn.integrate(q, -e), v, tau))
+                         / (2 * h))
+        cols["v"].append((f(q, v + e, tau) - f(q, v - e, tau)) / (2 * h))
+        cols["tau"].append((f(q, v, tau + e) - f(q, v, tau - e)) / (2 * h))
+    D = {key: np.stack(c, axis=-1) for key, c in cols.items()}
+    return tuple(D[key][:nv] for key in ("q", "v", "tau")) + \
+        tuple(D[key][nv:] for key in ("q", "v", "tau"))
+
+
+def check_against_differences(dyn, q, v, tau, on, rtol=1e-6, **options):
+    ours = dyn.constrained_forward_dynamics_derivatives(q, v, tau, on, **options)
+    for name, x, y in zip(NAMES, ours, central_differences(dyn, q, v, tau, on, **options)):
+        close(x, y, f"{name} of {dyn.info.name} {on} {options} (central differences)", rtol)
+
+
+# ------------------------------------------------------------------------------- ANYmal C
+
+@pytest.fixture(scope="module")
+def anymal(cache_dir):
+    """test_constraints's build of ANYmal C (the same constraints: one cached build)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gagen.InertiaWarning)
+        return gagen.load(URDF / "anymal_c.urdf", floating_base=True, cache_dir=cache_dir,
+                          constraints=ANYMAL_CONSTRAINTS)
+
+
+@pytest.fixture(scope="module")
+def anymal_pin(anymal):
+    pytest.importorskip("pinocchio")
+    from test_taskspace import urdf_twin
+
+    return PinConstraints(anymal, urdf_twin(anymal, "anymal_c.urdf", True))
+
+
+def test_anymal_every_subset_of_feet_matches_pinocchio(anymal, anymal_pin):
+    """3-D point contacts in LOCAL_WORLD_ALIGNED and LOCAL, every non-empty subset of feet."""
+    rng = np.random.default_rng(20)
+    q, v, tau = standing(anymal, rng)
+    for count in range(1, 5):
+        for feet in itertools.combinations(("LF", "RF", "LH", "RH"), count):
+            check_against_pinocchio(anymal, anymal_pin, feet, q, v, tau)
+            check_against_pinocchio(anymal, anymal_pin, [f"{f}_local" for f in feet], q, v,
+                                    tau)
+
+
+def test_anymal_6d_contacts_and_loops_match_pinocchio(anymal, anymal_pin):
+    rng = np.random.default_rng(21)
+    for names in (("LF6",), ("RH6",), ("LF6", "RH6"), ("RH6", "LF_local", "RF"),
+                  ("loop3",), ("loop3_local", "LH"), ("loop6",), ("loop6_local",)):
+        q, v, tau = conditioned_state(anymal, names, rng)
+        check_against_pinocchio(anymal, anymal_pin, names, q, v, tau)
+    q, v, tau = standing(anymal, rng)
+    check_against_pinocchio(anymal, anymal_pin, ("LF", "RF", "LH", "RH"), q, v, tau, kd=7.0)
+    check_against_pinocchio(anymal, anymal_pin, ("LF6", "RH_local"), q, v, tau, kd=3.0)
+
+
+def test_anymal_any_axes_and_damping_match_central_differences(anymal):
+    """A foot held on five axes, a loop on two (no Pinocchio counterpart), a damped solve
+    of redundant rows."""
+    rng = np.random.default_rng(22)
+    q, v, tau = standing(anymal, rng)
+    check_against_differences(anymal, q, v, tau, mask(anymal, "RF5", "loop2", "LH"))
+    check_against_differences(anymal, q, v, tau, mask(anymal, "LF", "LF_local", "RH"),
+                              damping=0.1)
+    check_against_differences(anymal, q, v, tau, mask(anymal, "LF6", "RH"),
+                              baumgarte=(0.0, 4.0))
+
+
+# --------------------------------------------------------------- random trees, the loop
+
+# the default run's tree is test_constraints's compiled one; the lambdify backend derives
+# its inverse dynamics derivatives in SymPy first (10-20 s a tree), with the slow tests (the
+# four-bar's test runs that backend by default)
+@pytest.mark.parametrize("seed, backend", [
+    (2, "compiled"), pytest.param(1, "compiled", marks=pytest.mark.slow),
+    pytest.param(1, "lambdify", marks=pytest.mark.slow),
+    pytest.param(2, "lambdify", marks=pytest.mark.slow)])
+def test_random_floating_trees_match_pinocchio(seed, backend, cache_dir):
+    pytest.importorskip("pinocchio")
+    from test_taskspace import Twin
+
+    dyn = load_tree(seed, backend, cache_dir)
+    ref = PinConstraints(dyn, Twin(dyn, pinocchio_model(numeric_model(dyn.model))))
+    rng = np.random.default_rng(seed + 20)
+    for names in (("leaf_a", "leaf_b"), ("loop",), ("loop_local",), ("base",),
+                  ("base", "loop")):
+        q, v, tau = random_state(dyn, rng)
+        check_against_pinocchio(dyn, ref, names, q, v, tau)
+
+
+@pytest.mark.parametrize("backend", ["lambdify", "compiled"])
+def test_fourbar_loop_matches_central_differences(backend, cache_dir):
+    dyn = fourbar(backend, cache_dir)
+    rng = np.random.default_rng(23)
+    for crank in (0.4, 2.2):
+        q, v, tau = closed_fourbar(crank), rng.normal(size=3), rng.normal(size=3)
+        check_against_differences(dyn, q, v, tau, None)
+        # the loop's own check: the constrained accelerations' derivatives keep J q̈ + J̇ q̇
+        # = 0 to first order in q̇ (∂/∂q̇ of the rows' acceleration is zero)
+        dqdd_dqd = dyn.constrained_forward_dynamics_derivatives(q, v, tau)[1]
+        J = dyn.constraint_jacobian(q)
+        h = 1e-6
+        ddrift = np.stack([(dyn.constraint_drift(q, v + h * e) - dyn.constraint_drift(
+            q, v - h * e)) / (2 * h) for e in np.eye(3)], axis=-1)
+        close(J @ dqdd_dqd + ddrift, np.zeros((2, 3)), "∂(J q̈ + J̇ q̇)/∂q̇ = 0",
+              rtol=1e-7, scale=float(np.abs(ddrift).max()))
+
+
+# ----------------------------------------------------------------- the API's contract
+
+# the lambdify tree derives its inverse dynamics derivatives in SymPy first (14 s): slow
+@pytest.mark.parametrize("backend", [pytest.param("lambdify", marks=pytest.mark.slow),
+                                     "compiled"])
+def test_stacked_inputs_give_stacked_fresh_outputs(backend, cache_dir):
+    dyn = load_tree(2, backend, cache_dir)
+    rng = np.random.default_rng(24)
+    states = [random_state(dyn, rng) for _ in range(3)]
+    Q, V, T = (np.stack([s[k] for s in states]) for k in range(3))
+    on = mask(dyn, "leaf_a", "loop_local")
+    stacked = dyn.constrained_forward_dynamics_derivatives(Q, V, T, on, (0.0, 1.5))
+    nv, rows = dyn.nv, dyn.info.constraint_rows
+    assert [x.shape for x in stacked] == [(3, nv, nv)] * 3 + [(3, rows, nv)] * 3
+    for k in range(3):
+        one = dyn.constrained_forward_dynamics_derivatives(Q[k], V[k], T[k], on, (0.0, 1.5))
+        for name, s, o in zip(NAMES, stacked, one):
+            close(s[k], o, f"stacked {name}", rtol=1e-13)
+    again = dyn.constrained_forward_dynamics_derivatives(Q[0], V[0], T[0], on, (0.0, 1.5))
+    assert all(not np.shares_memory(a, b) for a in again for b in one)
+    assert all(not np.shares_memory(a, b) for a, b in itertools.combinations(again, 2))
+
+
+@pytest.mark.parametrize("backend", ["lambdify", "compiled"])
+def test_bad_arguments_are_refused_with_one_line(backend, cache_dir):
+    dyn = fourbar(backend, cache_dir)
+    q, v = closed_fourbar(0.5), np.zeros(3)
+    call = dyn.constrained_forward_dynamics_derivatives
+    with pytest.raises(ValueError, match="active must have 1 booleans"):
+        call(q, v, v, [True, False])
+    with pytest.raises(ValueError, match="kp must be 0"):
+        call(q, v, v, baumgarte=(1.0, 0.0))
+    with pytest.raises(ValueError, match="baumgarte gains must be finite and >= 0"):
+        call(q, v, v, baumgarte=(0.0, -1.0))
+    with pytest.raises(ValueError, match="damping must be finite and >= 0"):
+        call(q, v, v, damping=-1.0)
+    with pytest.raises(ValueError, match="qd must have shape"):
+        call(q, np.zeros(2), v)
+    out = call(q, v, v, [False])  # nothing held: the unconstrained derivatives
+    free = dyn.forward_dynamics_derivatives(q, v, v)
+    for x, y in zip(out, free):
+        close(x, y, "no active constraint", rtol=1e-12)
+    assert all(not x.any() for x in out[3:])
+
+
+def test_the_c_of_one_state_matches_the_numpy_path(anymal, monkeypatch):
+    """One state goes through runtime/_constraint_terms.pyx, stacked states (and a build
+    without it) through NumPy: the two agree on random sets of every kind of constraint,
+    with kd and damping."""
+    from gagen.runtime import constraint_derivatives
+
+    assert constraint_derivatives._terms is not None, "the runtime's C was not built"
+    rng = np.random.default_rng(25)
+    names = [c.name for c in anymal.constraints]
+    checked = 0
+    while checked < 12:
+        chosen = tuple(n for n in names if rng.random() < 0.25)
+        if not chosen:
+            continue
+        try:
+            q, v, tau = conditioned_state(anymal, chosen, rng, limit=1e4)
+        except AssertionError:  # dependent rows at every state tried
+            continue
+        options = {"baumgarte": (0.0, float(rng.choice([0.0, 3.0]))),
+                   "damping": float(rng.choice([0.0, 0.1]))}
+        on = mask(anymal, *chosen)
+        ours = anymal.constrained_forward_dynamics_derivatives(q, v, tau, on, **options)
+        with monkeypatch.context() as patch:
+            patch.setattr(constraint_derivatives, "_terms", None)
+            numpy = anymal.constrained_forward_dynamics_derivatives(q, v, tau, on, **options)
+        for name, x, y in zip(NAMES, ours, numpy):
+            close(x, y, f"{name} of {chosen} {options}: C against NumPy")
+        checked += 1
+
+
+@pytest.mark.parametrize("backend", ["lambdify", "compiled"])
+def test_a_bad_floating_state_is_refused_with_one_line(backend, cache_dir):
+    dyn = load_tree(2, backend, cache_dir)
+    q, v, tau = random_state(dyn, np.random.default_rng(26))
+    (iq, _), = dyn.info.floating_joints()
+    zero = q.copy()
+    zero[iq + 3: iq + 7] = 0.0
+    on = ["leaf_a"]
+    with pytest.raises(ValueError, match="cannot be normalised in double precision"):
+        dyn.constrained_forward_dynamics_derivatives(zero, v, tau, on)
+    nan = v.copy()
+    nan[0] = np.nan  # as forward_dynamics: a NaN velocity gives NaN, never a crash
+    assert np.isnan(dyn.constrained_forward_dynamics_derivatives(q, nan, tau, on)[1]).any()
+    with pytest.raises(ValueError, match="q must have shape"):
+        dyn.constrained_forward_dynamics_derivatives(q[:-1], v, tau, on)
