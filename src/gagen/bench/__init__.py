@@ -3,8 +3,9 @@
 Modules: `timing` (the interleaved runner every section uses), `peers` (Pinocchio, PyDy
 and plain SymPy versions of the same robot), `percall`, `batched`, `simulation`,
 `scaling`, `coldbuild`, `pinocchio_cpp`, `floating`, `centroidal`, `taskspace`,
-`constraints`, `derivatives`, `casadi`, `report` (report.md and PNG plots) and `run` (the whole suite).
-Pinocchio and PyDy are optional (`pip install gagen[bench]`); without them their rows are skipped.
+`constraints`, `derivatives`, `casadi`, `jaxbench`, `report` (report.md and PNG plots) and
+`run` (the whole suite). Pinocchio and PyDy are optional (`pip install gagen[bench]`);
+without them their rows are skipped.
 
 This module holds only the command's description (gagen.app.cli parses the command line);
 the measurement code is imported when it runs.
@@ -61,6 +62,10 @@ Default (a few minutes on 2 cores):
                     inside CasADi (SX, and generated C at -O3; adam's compiles cached in
                     the cache folder), and the docs' IPOPT swing on each (needs casadi,
                     adam-robotics: pip install gagen[bench])
+  jax               4,096 states in jax.jit(jax.vmap(...)): forward dynamics and its
+                    jacfwd through gagen.jax's FFI and printed functions, against gagen's
+                    stacked call, adam's JAX backend and MuJoCo MJX (Panda, Panda arm,
+                    ANYmal C); the printed functions' JIT compile times
 --only SECTION ... runs the named sections alone.
 Candidates are timed interleaved (round-robin over the repeats); reported are medians,
 interquartile ranges and ratios to a baseline."""

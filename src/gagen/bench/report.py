@@ -128,6 +128,12 @@ allocation of the result. A machine's speed can drift by tens of percent between
 times across runs; results.json holds every sample."""
 
 
+def _jax_table(rows: list[dict]) -> str:
+    from .jaxbench import markdown_table
+
+    return markdown_table(rows)
+
+
 def throughput_table(rows: list[dict]) -> str:
     from .throughput import markdown_table
 
@@ -308,6 +314,22 @@ def markdown(results: dict, images: dict | None = None) -> str:
         "of 3 passes in each), so both meet the machine in the same states. "
         "(×): Pinocchio's time as a multiple of gagen's (> 1: gagen is faster).",
         scaling_table, None, images)
+    jx = results.get("jax", {})
+    lines += _section(
+        results, "jax", "gagen inside JAX: batched forward dynamics and its Jacobian",
+        f"{jx.get('states', '?')} states inside `jax.jit(jax.vmap(...))` (float64): "
+        "gagen's FFI functions (`gagen.jax.functions(dyn)`: one call of the compiled C loop "
+        "per batch), the printed JAX functions (`target=\"jax\"`), adam's JAX backend and "
+        "MuJoCo MJX (contacts and constraints off), against gagen's stacked call from "
+        "NumPy; the Jacobian is jax.jacfwd by (q, q̇, τ), the stacked call's "
+        "`dyn.forward_dynamics_derivatives`. Every result checked first; "
+        f"{jx.get('repeats', '?')} interleaved repeats.", _jax_table, None, images)
+    if jx.get("compile"):
+        from .jaxbench import compile_table
+
+        lines += [("JIT compile times of the vmapped functions (this process, wall and "
+                   "CPU), after printing the model's programs as JAX (once per model, kept "
+                   "in the cache):"), "", compile_table(jx["compile"]), ""]
     notes = results.get("notes") or []
     if notes:
         lines += ["## Notes", ""] + [f"- {n}" for n in notes] + [""]

@@ -28,7 +28,7 @@ from .common import PANDA, Progress, compiled, find_urdf_dir, machine_info, opti
 
 SECTIONS = ("percall", "batched", "simulation", "throughput", "scaling", "derivatives",
             "panda", "floating", "regressor", "centroidal",
-            "taskspace", "constraints", "casadi")
+            "taskspace", "constraints", "casadi", "jax")
 
 
 @dataclass
@@ -53,6 +53,8 @@ class Settings:
     derivatives_repeats: int = 21
     casadi_repeats: int = 11
     casadi_solve_repeats: int = 1
+    jax_repeats: int = 7
+    jax_states: int = 4096
     sections: tuple[str, ...] = ("percall", "batched", "simulation", "throughput", "scaling",
                                  "derivatives")
     scaling_models: list[str] | None = None  # None: the mode's default list
@@ -68,7 +70,8 @@ class Settings:
                        panda_repeats=3, scaling_models=["chain:2"], throughput_repeats=2,
                        throughput_runs=8, throughput_panda_runs=0, throughput_dask_chunks=0,
                        regressor_repeats=3, identify_repeats=1, identify_samples=500,
-                       derivatives_repeats=3, casadi_repeats=3)
+                       derivatives_repeats=3, casadi_repeats=3, jax_repeats=2,
+                       jax_states=64)
         return cls()
 
 
@@ -101,7 +104,8 @@ class Bench:
                                      "regressor": settings.regressor_repeats,
                                      "identify": settings.identify_repeats,
                                      "derivatives": settings.derivatives_repeats,
-                                     "casadi": settings.casadi_repeats}},
+                                     "casadi": settings.casadi_repeats,
+                                     "jax": settings.jax_repeats}},
             "notes": [],
         }
 
@@ -412,6 +416,19 @@ class Bench:
             self._note("casadi", note)
         return section
 
+    def jax(self) -> dict:
+        from .jaxbench import jax_rows
+
+        s = self.settings
+        # the models' builds and printed JAX: in --cache-dir when given (kept between runs)
+        cache = Path(self.user_cache_dir) if self.user_cache_dir else None
+        section = jax_rows(self.urdf_dir, self.scratch / "jax", s.jax_repeats, s.target_s,
+                           progress=lambda text: self.progress("jax", text),
+                           states=s.jax_states, cache_dir=cache)
+        self.results["notes"].extend(section.get("notes", []))
+        section["repeats"] = s.jax_repeats
+        return section
+
     # -- the run ---------------------------------------------------------------------
 
     def save(self) -> Path:
@@ -427,7 +444,7 @@ class Bench:
                   "derivatives": "derivatives", "panda": "panda", "floating": "floating",
                   "regressor": "regressor", "centroidal": "centroidal",
                   "taskspace": "task space", "constraints": "constraints",
-                  "casadi": "casadi"}
+                  "casadi": "casadi", "jax": "jax"}
         try:
             if {"percall", "batched", "simulation", "throughput"} & set(self.settings.sections):
                 start = time.perf_counter()

@@ -1,0 +1,111 @@
+"""The linear algebra the printed JAX programs share: the outputs' assembly and the LDLᵀ
+factorisation and solves of M, unrolled over M's structure as the C does (the plan of
+gagen.codegen.ldlt, printed into each module as numbers). Runtime code: no SymPy.
+
+M is given as its lower triangle, row by row ((..., n (n + 1) / 2)); the factors keep
+U = L D in its place (the C's layout: every update is (U U) / D) and 1/D. Sums run in the
+C's order, so the printed functions round as the compiled kernels do.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+
+def stack(entries, shape: tuple[int, ...]):
+    """Entries (arrays over the same leading dimensions, or numbers) as one array of shape
+    (leading..., *shape)."""
+    arrays = [jnp.asarray(e) for e in entries]
+    lead = jnp.broadcast_shapes(*(a.shape for a in arrays))
+    dtype = jnp.result_type(*arrays)
+    out = jnp.stack([jnp.broadcast_to(a, lead).astype(dtype) for a in arrays], axis=-1)
+    return out.reshape(lead + tuple(shape))
+
+
+def lower_index(r: int, s: int) -> int:
+    """The position of M's entry (r, s), s <= r, in its lower triangle row by row."""
+    return r * (r + 1) // 2 + s
+
+
+def symmetric(lower, n: int):
+    """The full (..., n, n) matrix of a lower triangle."""
+    index = [[lower_index(max(r, s), min(r, s)) for s in range(n)] for r in range(n)]
+    return lower[..., jnp.array(index)]
+
+
+def factor(lower, plan):
+    """(U, Dinv) of M = L D Lᵀ, unrolled along `plan` (gagen.codegen.ldlt.LDLTPlan as
+    numbers: n, pivots (j, terms, updates), forward, backward)."""
+    n, pivots = plan[0], plan[1]
+    U = {(r, s): lower[..., lower_index(r, s)] for r in range(n) for s in range(r)}
+    dinv = [None] * n
+    for j, terms, updates in pivots:
+        d = lower[..., lower_index(j, j)]
+        for k in terms:
+            d = d - (U[j, k] * U[j, k]) * dinv[k]
+        dinv[j] = 1.0 / d
+        for i, ks in updates:
+            u = U[i, j]
+            for k in ks:
+                u = u - (U[i, k] * U[j, k]) * dinv[k]
+            U[i, j] = u
+    return U, dinv
+
+
+def solve_factored(factors, F, plan):
+    """M⁻¹ F with the factors: L y = F (z = D⁻¹ y), then Lᵀ x = z."""
+    U, dinv = factors
+    n, forward, backward = plan[0], plan[2], plan[3]
+    y, z, x = [None] * n, [None] * n, [None] * n
+    for i, ks in forward:
+        yi = F[..., i]
+        for k in ks:
+            yi = yi - U[i, k] * z[k]
+        y[i] = yi
+        z[i] = yi * dinv[i]
+    for i, ks in backward:
+        if ks:
+            xi = y[i]
+            for k in ks:
+                xi = xi - U[k, i] * x[k]
+            x[i] = xi * dinv[i]
+        else:
+            x[i] = z[i]
+    return stack(x, (n,))
+
+
+def solve_lower(lower, F, plan):
+    """M⁻¹ F for M given by its lower triangle."""
+    return solve_factored(factor(lower, plan), F, plan)
+
+
+def _solve_rows(factors, rows, plan):
+    """M⁻¹ X for X given by its rows (each (..., m)), as the C's solve_columns."""
+    U, dinv = factors
+    forward, backward = plan[2], plan[3]
+    X = list(rows)
+    for i, ks in forward:
+        xi = X[i]
+        for k in ks:
+            xi = xi - U[i, k][..., None] * X[k]
+        X[i] = xi * dinv[i][..., None]
+    for i, ks in backward:
+        if not ks:
+            continue
+        total = None
+        for k in ks:
+            term = U[k, i][..., None] * X[k]
+            total = term if total is None else total + term
+        X[i] = X[i] - dinv[i][..., None] * total
+    return jnp.stack(X, axis=-2)
+
+
+def forward_derivatives(factors, dtau_dq, dtau_dqd, plan):
+    """(∂q̈/∂q, ∂q̈/∂q̇, M⁻¹) = (−M⁻¹ ∂τ/∂q, −M⁻¹ ∂τ/∂q̇, M⁻¹) at q̈ = M⁻¹ F."""
+    n = plan[0]
+    dq = _solve_rows(factors, [-dtau_dq[..., i, :] for i in range(n)], plan)
+    dqd = _solve_rows(factors, [-dtau_dqd[..., i, :] for i in range(n)], plan)
+    lead = jnp.broadcast_shapes(dq.shape[:-2], factors[1][0].shape)
+    eye = jnp.broadcast_to(jnp.eye(n, dtype=dq.dtype), lead + (n, n))
+    Minv = _solve_rows(factors, [eye[..., i, :] for i in range(n)], plan)
+    return dq, dqd, Minv
