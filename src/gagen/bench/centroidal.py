@@ -16,18 +16,13 @@ from pathlib import Path
 import numpy as np
 
 from .common import optional
-from .percall import GAGEN, rows_from
+from .percall import GAGEN, _candidate, rows_from
 from .timing import Candidate, interleaved
 
 ROBOT = "anymal_c.urdf"
 QUANTITIES = ("A_g", "A_g and its bias d/dt A_g qd", "d/dt A_g", "centre of mass")
 GOAL = 1.5  # Pinocchio's time over gagen's, for A_g alone and with its bias
 
-
-def _candidate(quantity: str, implementation: str, call: str, fn, args) -> Candidate:
-    return Candidate(f"{quantity} / {implementation}", fn, tuple(args), group=quantity,
-                     info={"quantity": quantity, "implementation": implementation,
-                           "call": call})
 
 
 def centroidal_rows(urdf_dir: Path, cache_dir: Path, repeats: int, target: float,

@@ -20,7 +20,7 @@ import numpy as np
 
 from . import constraint_derivatives as derivatives
 from .common import optional
-from .percall import GAGEN, rows_from
+from .percall import GAGEN, _candidate, rows_from
 from .timing import Candidate, interleaved
 
 ROBOT = "anymal_c.urdf"
@@ -28,11 +28,6 @@ FEET = ("LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT")
 QUANTITIES = ("constrained FD", "impulse", derivatives.QUANTITY, derivatives.PART)
 GOAL = 2.0  # Pinocchio's constraintDynamics time over gagen's
 
-
-def _candidate(quantity: str, implementation: str, call: str, fn, args) -> Candidate:
-    return Candidate(f"{quantity} / {implementation}", fn, tuple(args), group=quantity,
-                     info={"quantity": quantity, "implementation": implementation,
-                           "call": call})
 
 
 def constraints_rows(urdf_dir: Path, cache_dir: Path, repeats: int, target: float,

@@ -18,17 +18,12 @@ from pathlib import Path
 import numpy as np
 
 from .common import optional
-from .percall import GAGEN, rows_from
+from .percall import GAGEN, _candidate, rows_from
 from .timing import Candidate, interleaved
 
 ROBOTS = (("anymal_c.urdf", "LF_FOOT"), ("talos_full_v2.urdf", "left_sole_link"))
 QUANTITIES = ("forward dynamics", "inverse dynamics", "mass matrix", "frame Jacobian")
 
-
-def _candidate(quantity: str, implementation: str, call: str, fn, args) -> Candidate:
-    return Candidate(f"{quantity} / {implementation}", fn, tuple(args), group=quantity,
-                     info={"quantity": quantity, "implementation": implementation,
-                           "call": call})
 
 
 def floating_rows(urdf_dir: Path, cache_dir: Path, repeats: int, target: float,

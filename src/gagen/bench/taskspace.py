@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .common import optional
-from .percall import GAGEN, rows_from
+from .percall import GAGEN, _candidate, rows_from
 from .timing import Candidate, interleaved
 
 # (URDF, floating base, frame, rows of Λ: 6 for a tool's pose, 3 for a foot's point contact)
@@ -25,11 +25,6 @@ ROBOTS = (("panda.urdf", False, "panda_hand_tcp", 6), ("anymal_c.urdf", True, "L
 QUANTITIES = ("J̇ q̇", "J̇", "Λ")
 GOAL = 1.5  # Pinocchio's time over gagen's, on each quantity
 
-
-def _candidate(quantity: str, implementation: str, call: str, fn, args) -> Candidate:
-    return Candidate(f"{quantity} / {implementation}", fn, tuple(args), group=quantity,
-                     info={"quantity": quantity, "implementation": implementation,
-                           "call": call})
 
 
 def taskspace_rows(urdf_dir: Path, cache_dir: Path, repeats: int, target: float,
