@@ -44,8 +44,10 @@ class Reference:
 
     def __init__(self, dyn, model):
         self.model, self.data = model, model.createData()
-        if hasattr(model, "gagen_order"):  # gagen's builder: permutations given
-            self.v_order, self.q_order = model.gagen_order, model.gagen_configuration_order
+        if hasattr(model, "gagen_order"):  # gagen's builder: gagen's index of each of
+            # Pinocchio's entries; here Pinocchio's index of each of gagen's, its inverse
+            self.v_order = np.argsort(model.gagen_order)
+            self.q_order = np.argsort(model.gagen_configuration_order)
         else:  # Pinocchio's URDF parse: match the joints by name, the base first
             names = dyn.coordinates[6:]
             ids = [model.getJointId(n) for n in names]
