@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import gagen
 from gagen.app.cli import main
 from gagen.bench import timing
 from gagen.bench.common import cpu_model, find_urdf_dir, machine_info
@@ -260,3 +262,42 @@ def test_scaling_table_shows_both_cpp_peers():
     table = markdown_table([row])
     assert "C++ storing ×" in table.splitlines()[0]
     assert table.splitlines()[2].endswith("| 2.00 (0.9×, 2.0×) |")
+
+
+# --------------------------------------------------- the derivatives' floating-base peers
+
+def test_derivative_goal_and_build_notes_and_the_casadi_table():
+    from gagen.bench.derivatives import build_notes, casadi_table, goal_note
+
+    rows = [{"model": "ANYmal C", "quantity": "inverse dynamics derivatives",
+             "implementation": implementation, "median_us": us}
+            for implementation, us in (("gagen compiled", 2.0), ("Pinocchio", 5.0))]
+    note = goal_note(rows, "ANYmal C", "inverse dynamics derivatives", 2.0)
+    assert note.startswith("Goal: ANYmal C's inverse dynamics derivatives") and "met (2.50x" in note
+    assert "NOT met" in goal_note(rows, "ANYmal C", "inverse dynamics derivatives", 3.0)
+    assert goal_note(rows, "ANYmal C") is None  # no forward-dynamics rows
+    builds = [{"model": "anymal (floating)", "module": "main", "wall_s": 12.0},
+              {"model": "anymal (floating)", "module": "derivatives", "wall_s": 9.0}]
+    assert build_notes(builds, ["anymal (floating)"]) == [
+        ("Goal: anymal (floating)'s derivative module built cold no slower than its main "
+         "module: met (9.0 s against 12.0 s).")]
+    table = casadi_table([{"model": "ANYmal C", "nv": 18, "gagen_us": 4.0, "casadi_us": 60.0,
+                           "ratio": 15.0}])
+    assert table.splitlines()[2] == "| ANYmal C | 18 | 4.00 | 60.00 | 15.00 |"
+
+
+def test_adam_and_casadi_agree_with_gagen_on_a_floating_base():
+    """The CasADi peer's conventions (BODY_FIXED velocities, q's layout, the Jacobian's
+    columns) checked against gagen's forward dynamics and its derivatives."""
+    pytest.importorskip("casadi")
+    pytest.importorskip("adam")
+    from gagen.bench.casadi_c import CasadiPeer, check
+
+    path = Path(__file__).resolve().parent / "data" / "urdf" / "double_pendulum.urdf"
+    dyn = gagen.load(path, floating_base=True, backend="lambdify")
+    g = dict(zip(dyn.parameters, dyn.parameter_vector()))["g"]
+    peer = CasadiPeer(path, dyn.coordinates[6:], g)
+    check(dyn, peer, np.random.default_rng(1))
+    wrong = CasadiPeer(path, dyn.coordinates[6:], g + 1.0)
+    with pytest.raises(RuntimeError, match="disagree"):
+        check(dyn, wrong, np.random.default_rng(1))

@@ -272,3 +272,77 @@ def test_derivative_form_rule():
         derivative_form(_model("tree1"), "rolled")
     assert derivative_form(_model("tree1"), "unrolled") == "unrolled"
     assert derivative_form(_model("anymal_c.urdf")) in FORMS
+
+
+# --- the loop form's C on its own -----------------------------------------------------------
+
+STANDALONE = r"""
+#include <stdio.h>
+#include "%(ident)s_derivatives.h"
+
+int main(void)
+{
+    const double p[%(np)d] = {%(p)s};
+    const double q[%(nq)d] = {%(q)s}, qd[%(nv)d] = {%(v)s}, x[%(nv)d] = {%(x)s};
+    double a[%(nn)d], b[%(nn)d], c[%(nn)d];
+    int k, rc;
+    %(ident)s_inverse_dynamics_derivatives(q, qd, x, p, a, b);
+    for (k = 0; k < %(nn)d; ++k)
+        printf("%%.17g %%.17g\n", a[k], b[k]);
+    rc = %(ident)s_forward_dynamics_derivatives(q, qd, x, p, a, b, c);
+    for (k = 0; k < %(nn)d; ++k)
+        printf("%%.17g %%.17g %%.17g\n", a[k], b[k], c[k]);
+    %(ident)s_coriolis_matrix(q, qd, p, a);
+    for (k = 0; k < %(nn)d; ++k)
+        printf("%%.17g\n", a[k]);
+    return rc;
+}
+"""
+
+
+def test_the_loop_form_is_plain_c99_with_no_writable_static_data(tmp_path):
+    """The loop form's C compiles on its own as strict C99 (-Wall -Wextra -Werror
+    -pedantic), holds no global or static data but constant tables, and computes the numbers
+    the module computes."""
+    import shutil
+    import subprocess
+
+    from gagen.building.builder import generate_sources
+
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed")
+    model = _model("tree3")
+    generate_sources(model, tmp_path, derivatives=True,
+                     config=CodegenConfig(derivative_form="loop"))
+    dyn = compiled_dynamics("tree3", "loop")
+    q, v, x = random_state(dyn, np.random.default_rng(9))
+    ident = next(tmp_path.glob("*_derivatives.h")).name[: -len("_derivatives.h")]
+    numbers = ", ".join
+    (tmp_path / "main.c").write_text(STANDALONE % {
+        "ident": ident, "np": len(dyn.parameters), "nq": dyn.nq, "nv": dyn.nv,
+        "nn": dyn.nv ** 2, "p": numbers(repr(float(e)) for e in dyn.parameter_vector()),
+        "q": numbers(map(repr, map(float, q))), "v": numbers(map(repr, map(float, v))),
+        "x": numbers(map(repr, map(float, x)))})
+    sources = sorted(p.name for p in tmp_path.glob("*.c") if p.name != "derivatives_module.c")
+    exe = tmp_path / "demo"
+    subprocess.run(["gcc", "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic",
+                    "-o", str(exe), *sources, "-lm"], cwd=tmp_path, check=True)
+    out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout
+    values = np.array(out.split(), dtype=float)
+    n2 = dyn.nv ** 2
+    want = np.concatenate([
+        np.column_stack([m.ravel() for m in dyn.inverse_dynamics_derivatives(q, v, x)]).ravel(),
+        np.column_stack([m.ravel() for m in dyn.forward_dynamics_derivatives(q, v, x)]).ravel(),
+        dyn.coriolis_matrix(q, v).ravel()])
+    assert values.size == 6 * n2
+    np.testing.assert_allclose(values, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
+    for source in sources:
+        if source == "main.c":
+            continue
+        obj = tmp_path / f"{source}.o"
+        subprocess.run(["gcc", "-std=c99", "-O2", "-c", source, "-o", str(obj)],
+                       cwd=tmp_path, check=True)
+        symbols = subprocess.run(["nm", str(obj)], capture_output=True, text=True,
+                                 check=True).stdout.split("\n")
+        data = [s for s in symbols if len(s.split()) == 3 and s.split()[1] in "BDdbCG"]
+        assert data == [], f"{source} defines writable global or static data: {data}"

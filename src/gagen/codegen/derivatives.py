@@ -73,9 +73,10 @@ DERIVATIVE_COPIED_FILES = ("gagen_math.h", "gagen_api.h", "integrator.h")
 DERIVATIVE_C_FILES = (("derivatives.c", "api"), ("derivative_fixed.c", "fixed"),
                       ("derivative_acceleration.c", "acceleration"),
                       ("derivative_coriolis.c", "coriolis"))
-# The loop form solves with M for the forward-dynamics derivatives' 3n right-hand sides this
-# many columns at a time, kept in registers
-SOLVE_CHUNK = 32
+# The loop form solves with M for the forward-dynamics derivatives' 3n right-hand sides at
+# most this many columns at a time, kept in registers (12 AVX registers, of 16), in as few
+# chunks as that allows, each a multiple of 8 columns
+SOLVE_CHUNK = 48
 # ... in loop form: the API functions and the loops, and the generated geometry
 DERIVATIVE_LOOP_FILES = (("derivatives.c", "api"), ("derivative_geometry.c", "geometry"))
 # the derivative module's one file that speaks to Python: its kernels' table
@@ -131,6 +132,12 @@ class LoopBlocks:
     joints: CodeBlock
 
 
+def solve_chunk(n: int) -> int:
+    """The columns the loop form's solve takes at a time for 3n right-hand sides."""
+    chunks = -(-3 * n // SOLVE_CHUNK)
+    return -(-3 * n // (8 * chunks)) * 8
+
+
 def _loop_context(tree, cse: CSEResult, kernels: _Kernels) -> dict:
     """The loop form's blocks and tree tables for model/derivatives_loop.c.j2."""
     out = cse.outputs
@@ -143,11 +150,20 @@ def _loop_context(tree, cse: CSEResult, kernels: _Kernels) -> dict:
         if cols != list(range(cols[0], cols[0] + len(cols))):
             raise AssertionError("a joint's velocity coordinates are not contiguous")
     slot = {b: r for r, b in enumerate(tree.roots)}
+    up = tree.column_parent
+    runs = []
+    for c in range(len(up)):
+        lo = c
+        while lo > 0 and up[lo] == lo - 1:
+            lo -= 1
+        runs.append(lo)
     return {"tree": tree, "blocks": LoopBlocks(geometry, joints),
             "first": [cols[0] for cols in tree.columns],
             "count": [len(cols) for cols in tree.columns],
             "root_slot": [slot.get(b, -1) for b in range(len(tree.parents))],
-            "free": [int(f) for f in tree.free_roots], "chunk": SOLVE_CHUNK}
+            "free": [int(f) for f in tree.free_roots], "chunk": solve_chunk(len(up)),
+            "runs": runs,
+            "depth_first": tree.column_order == list(range(len(up)))}
 
 
 def _blocks(deq: DerivativeEquations, kernels: _Kernels) -> DerivativeBlocks:

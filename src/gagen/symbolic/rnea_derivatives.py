@@ -1,5 +1,6 @@
-"""The inverse-dynamics derivatives of a fixed-base tree, by an analytical algorithm in
-one common frame (the world's), written symbolically.
+"""The inverse-dynamics derivatives of a tree, fixed or floating, by an analytical algorithm
+in one common frame, written symbolically; and the Coriolis matrix, M and the bias forces
+from the same quantities.
 
 Forward mode through the body-frame RNEA (`differentiate`) carries each of the 2n
 directions through every body after it: O(n * depth) spatial transforms per direction.
@@ -8,17 +9,18 @@ is a cross product with the joint's motion vector S_j plus a few terms of its ow
 each entry of the Jacobians becomes one or two 6-dot products (Carpentier and Mansard,
 "Analytical derivatives of rigid body dynamics algorithms", RSS 2018, who derive the same
 quantities from the RNEA in Pinocchio's world frame). This module derives them afresh in
-gagen's notation; tests/test_derivatives.py checks them against forward mode and Pinocchio.
+gagen's notation; tests/test_derivatives.py and tests/test_floating_derivatives.py check
+them against forward mode, central differences and Pinocchio.
 
-Spatial vectors are pairs of 3-vectors about the world origin: a motion (w, v) is an
+Spatial vectors are pairs of 3-vectors about the common origin: a motion (w, v) is an
 angular velocity and the velocity of the body point at the origin; a force (n, f) is a
 moment about the origin and a force. Cross products: (w1, v1) x (w2, v2) = (w1 x w2,
 w1 x v2 + v1 x w2) for motions, (w, v) x* (n, f) = (w x n + v x f, w x f) on forces. An
 inertia is (m, c, I): the mass, the first moment m r_C and the inertia about the origin;
 it maps a motion to the momentum (I w + c x v, m v + w x c).
 
-For body k (of path 1..k from the root), with S_k the world motion vector of its joint
-and lambda(k) its parent:
+For body k (of path 1..k from the root), with S_k the motion vector of its joint and
+lambda(k) its parent:
 
     v_k = v_lambda + S_k qd_k                      a_0 = (0, -g): gravity
     a_k = a_lambda + S_k qdd_k + (v_lambda x S_k) qd_k
@@ -32,20 +34,40 @@ remains are the joint's own terms
 
 with d v_k/d q_j = S_j x v_k + dVdq_j and d a_k/d q_j = S_j x a_k + dAdq_j + dVdq_j x v_k
 for k in the subtree of j, and (by q_d) d v_k/d qd_j = S_j, d a_k/d qd_j = S_j x v_k +
-2 dVdq_j. With the subtree sums Y_i = sum I_k (composite inertia), Ydot_i = sum
-(v_k x* I_k - I_k v_k x) (the rate of each inertia, again an inertia with no mass),
-H_i = sum I_k v_k (momentum) and F_i = sum f_k, and B_i psi = Ydot_i psi + psi x* H_i:
+X_j with X_j = 2 dVdq_j. With the subtree sums Y_i = sum I_k (composite inertia),
+Ydot_i = sum (v_k x* I_k - I_k v_k x) (the rate of each inertia, again an inertia with no
+mass), H_i = sum I_k v_k (momentum) and F_i = sum f_k, and B_i psi = Ydot_i psi + psi x* H_i:
 
     i an ancestor of j or j:  d tau_i/d q_j  = S_i . D_j,  D_j = S_j x* F_j + Y_j dAdq_j + B_j dVdq_j
-                              d tau_i/d qd_j = S_i . E_j,  E_j = 2 Y_j dVdq_j + B_j S_j
+                              d tau_i/d qd_j = S_i . E_j,  E_j = Y_j X_j + B_j S_j
     i a descendant of j:      d tau_i/d q_j  = u_i . dAdq_j + w_i . dVdq_j
-                              d tau_i/d qd_j = 2 u_i . dVdq_j + w_i . S_j
+                              d tau_i/d qd_j = u_i . X_j + w_i . S_j
     with u_i = Y_i S_i and w_i = B_i^T S_i = Ydot_i S_i - S_i x* H_i;
 
-every other entry is zero. d tau/d qd of the rigid body is 2 C, twice the Coriolis
-matrix (symbolic/derivatives.py). The joint terms (added by the caller) add damping_k to
+every other entry is zero. The joint terms (added by the caller) add damping_k to
 d tau_k/d qd_k: Coulomb friction's sign(qd) has derivative 0 where it has one, and the
 armature multiplies qdd.
+
+A floating joint has six coordinates: the body's twist in its own axes (Pinocchio's
+FreeFlyer), and d/dq is taken along those velocity directions, d/de f(q (+) e e_j), as
+Pinocchio's derivatives are. Its motion vectors S_k are fixed in its body, so each moves
+with the others: S_k's rate is Sdot_k = v x S_k (v: the body's velocity), and moving along
+S_j turns S_k by S_j x S_k. Carried through the same steps: v = v_lambda + sum S_k qd_k,
+a = a_lambda + sum S_k qdd_k + v_lambda x v (which is also a 1-dof joint's), dVdq_j and
+dAdq_j as above, and X_j = dVdq_j + Sdot_j (for a 1-dof joint Sdot_j = v_lambda x S_j =
+dVdq_j, hence its 2 dVdq_j). Within the joint its own rows are descendants' rows: row k,
+column j of the six is u_k . dAdq_j + w_k . dVdq_j.
+
+The Coriolis matrix is Pinocchio's (computeCoriolisMatrix), with G_j = Y_j Sdot_j +
+B_j S_j / 2: C_ij = S_i . G_j for i an ancestor of j or j, C_ij = u_i . Sdot_j +
+w_i . S_j / 2 for i a descendant. C qd = b and Mdot - 2C is skew-symmetric. Where every
+joint has one coordinate, C = 1/2 d tau/d qd of the rigid body, the symmetric Christoffel
+matrix (symbolic/derivatives.py); with a floating joint it is not (its rates are
+quasi-velocities).
+
+The common frame is the world's, or for a tree whose root floats, the root's own frame at
+this instant (`common_frames`): then the root's six motion vectors are unit vectors, its
+pose drops out, and only gravity turns with it, which halves ANYmal's program.
 """
 
 from __future__ import annotations
