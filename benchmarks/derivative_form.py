@@ -37,7 +37,7 @@ URDF = REPO / "tests" / "data" / "urdf"
 DEFAULT_MODELS = ["chain:4", str(URDF / "ur5_robot.urdf"), "chain:8", str(URDF / "panda.urdf"),
                   "chain:12", "chain:16", "chain:50",
                   f"{URDF / 'double_pendulum.urdf'}@floating",
-                  f"{URDF / 'ur5_robot.urdf'}@floating", f"{URDF / 'anymal_c.urdf'}@floating",
+                  f"{URDF / 'panda.urdf'}@floating", f"{URDF / 'anymal_c.urdf'}@floating",
                   f"{URDF / 'talos_reduced.urdf'}@floating", f"{URDF / 'tiago.urdf'}@floating",
                   f"{URDF / 'talos_full_v2.urdf'}@floating"]
 FORMS = ("unrolled", "loop")

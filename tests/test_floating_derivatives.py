@@ -268,10 +268,17 @@ def test_forward_mode_on_a_floating_base_takes_the_coriolis_matrix_of_the_analyt
 
 
 def test_derivative_form_rule():
+    from gagen.symbolic.derivatives import DERIVATIVE_LOOP_FROM_DOF
+
     with pytest.raises(ValueError, match="unknown derivative form"):
         derivative_form(_model("tree1"), "rolled")
     assert derivative_form(_model("tree1"), "unrolled") == "unrolled"
-    assert derivative_form(_model("anymal_c.urdf")) in FORMS
+    assert derivative_form(_model("anymal_c.urdf")) == "loop"
+    assert derivative_form(resolve_model(f"chain:{DERIVATIVE_LOOP_FROM_DOF}")) == "loop"
+    assert derivative_form(resolve_model(f"chain:{DERIVATIVE_LOOP_FROM_DOF - 1}")) == "unrolled"
+    floating_pendulum = resolve_model(URDF / "double_pendulum.urdf", floating_base=True)
+    assert floating_pendulum.dof < DERIVATIVE_LOOP_FROM_DOF
+    assert derivative_form(floating_pendulum) == "unrolled"
 
 
 # --- the loop form's C on its own -----------------------------------------------------------

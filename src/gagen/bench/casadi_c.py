@@ -155,7 +155,7 @@ class CasadiPeer:
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # adam on the root link it picks itself
-            kd = KinDynComputations(Path(urdf).read_text(), list(joints),
+            kd = KinDynComputations(_for_adam(Path(urdf).read_text()), list(joints),
                                     gravity=np.array([0.0, 0.0, -gravity, 0.0, 0.0, 0.0]))
         kd.set_frame_velocity_representation(Representations.BODY_FIXED_REPRESENTATION)
         n = len(joints)
@@ -180,6 +180,18 @@ class CasadiPeer:
         gen.add(self.jacobian)
         gen.generate(str(folder) + os.sep)
         return folder / f"{self.NAME}.c"
+
+
+def _for_adam(text: str) -> str:
+    """The URDF with an explicit origin in every <inertial> (URDF's default, the identity,
+    which adam's parser does not supply: Talos leaves some out)."""
+    import xml.etree.ElementTree as ET
+
+    robot = ET.fromstring(text)
+    for inertial in robot.iter("inertial"):
+        if inertial.find("origin") is None:
+            ET.SubElement(inertial, "origin", {"xyz": "0 0 0", "rpy": "0 0 0"})
+    return ET.tostring(robot, encoding="unicode")
 
 
 def compiled_object(source: Path, folder: Path) -> tuple[Path | None, str]:

@@ -148,7 +148,8 @@ def generate_sources(model: Model, folder: Path, progress: Progress | None = Non
         form = derivative_form(model, (config or CodegenConfig()).derivative_form)
         deq = derive_derivatives(eqs, form=form)
         detail = (f"{model.dof} coordinates, {len(deq.intermediates)} intermediates "
-                  f"(equations {eqs.seconds:.2f} s, derivatives {deq.seconds:.2f} s)")
+                  f"(equations {eqs.seconds:.2f} s, derivatives {deq.seconds:.2f} s; "
+                  f"{form} form)")
     else:
         detail = f"{model.dof} coordinates, {len(eqs.intermediates)} intermediates"
     progress.stage("derive", time.perf_counter() - start, detail)

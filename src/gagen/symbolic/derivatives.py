@@ -164,17 +164,54 @@ def derivative_method(model, method: str = "auto") -> str:
 
 
 DERIVATIVE_FORMS = ("auto", "unrolled", "loop")
+# From this many coordinates on, fixed base or floating, "auto" writes the derivative module
+# in loop form: the tree's geometry generated (O(n) code) and short C loops running the
+# analytical algorithm on it, instead of its whole program unrolled, whose code grows with
+# the (ancestor, descendant) pairs: O(n * depth). Measured by benchmarks/derivative_form.py
+# on this project's 2-core machine (shared and busy: the best of 200 rounds of 200 calls,
+# both forms in one C program, alternating; builds cold in fresh processes): cold build s
+# of the main module, the unrolled and the loop derivative module; per call µs unrolled /
+# loop (ratio, above 1: the loop form is faster) of the forward-dynamics derivatives, the
+# inverse-dynamics derivatives and the Coriolis matrix:
+#
+#   model (coordinates)       builds s           FD                  ID                 C
+#   chain:4 (4)               9.1, 7.6, 7.0      0.23/0.53 (0.43)    0.19/0.44 (0.44)   0.11/0.26 (0.41)
+#   UR5 (6)                   22.8, 14.3, 7.9    0.53/0.92 (0.58)    0.42/0.72 (0.58)   0.22/0.43 (0.52)
+#   chain:8 (8)               18.0, 25.4, 6.8    1.44/1.34 (1.08)    0.62/1.04 (0.60)   0.31/0.60 (0.52)
+#   double pendulum, floating (8)
+#                             19.9, 7.3, 8.8     0.27/1.01 (0.27)    0.17/0.66 (0.26)   0.08/0.36 (0.23)
+#   Panda (9)                 20.3, 24.2, 9.5    1.79/1.62 (1.10)    1.43/1.16 (1.23)   0.37/0.69 (0.54)
+#   chain:10 (10)             17.3, 34.1, 8.2    2.38/1.94 (1.23)    1.75/1.33 (1.32)   0.44/0.81 (0.54)
+#   SO-100, floating (12)     15.4, 35.6, 13.5   2.01/2.05 (0.98)    1.46/1.19 (1.22)   0.36/0.69 (0.51)
+#   chain:12 (12)             26.0, 50.5, 12.8   3.01/2.56 (1.18)    2.22/1.66 (1.34)   0.56/0.96 (0.58)
+#   Panda, floating (15)      38.1, 52.6, 17.2   3.77/3.28 (1.15)    2.02/1.69 (1.20)   0.49/0.99 (0.50)
+#   chain:16 (16)             36.9, 123.4, 20.9  5.88/4.18 (1.41)    3.47/2.48 (1.40)   1.85/1.37 (1.35)
+#   ANYmal C, floating (18)   45.0, 57.1, 12.4   4.13/3.90 (1.06)    2.34/2.16 (1.08)   0.54/1.07 (0.50)
+#   Talos reduced, fl. (38)   51.1, 91.9, 21.8   20.4/14.9 (1.37)    8.70/6.24 (1.39)   4.57/2.97 (1.54)
+#   chain:50 (50)             115.8, 329.3, 35.2 405/71.0 (5.70)     27.9/15.4 (1.81)   13.2/8.59 (1.54)
+#   Talos full, fl. (50)      77.2, 127.4, 16.7  85.3/26.7 (3.19)    14.2/9.51 (1.49)   6.81/5.28 (1.29)
+#   Tiago, floating (54)      75.1, 143.4, 40.5  151/36.5 (4.14)     16.5/11.2 (1.47)   8.55/6.33 (1.35)
+#
+# Up to 8 coordinates the unrolled program is faster on every kernel (2 to 4x on the
+# smallest), its build no slower; from 9 on the loop form is faster on the derivatives MPC
+# calls (the ID derivatives 1.08x to 1.81x, the FD derivatives 1.06x to 5.7x but for the
+# floating SO-100's, level at 0.98x), builds 2.5 to 9x faster (and faster than the main
+# module), and from 16 on its Coriolis matrix is faster too (below, it takes up to twice as
+# long: 0.3 to 0.5 µs more). (The fixed-base rows were measured before the loop form
+# skipped D for a root's coordinates, which only helps it.)
+DERIVATIVE_LOOP_FROM_DOF = 9
 
 
 def derivative_form(model, form: str = "auto") -> str:
     """"unrolled" or "loop": what `form` ("auto", "unrolled", "loop") means here (the
-    compiled derivative module's form; the rule and its measurements are above)."""
+    compiled derivative module's form, by the measured rule above; forward mode, below
+    ANALYTIC_FROM_DOF, is unrolled)."""
     if form not in DERIVATIVE_FORMS:
         raise ValueError(f"unknown derivative form '{form}' (expected one of "
                          f"{', '.join(DERIVATIVE_FORMS)})")
     if form != "auto":
         return form
-    return "unrolled"
+    return "loop" if model.dof >= DERIVATIVE_LOOP_FROM_DOF else "unrolled"
 
 
 def derive_derivatives(eqs: Equations, method: str = "auto", form: str = "unrolled"
