@@ -1,10 +1,13 @@
 """simulate_batch(..., client=) on a Dask LocalCluster of two worker processes: the same
-numbers as the local run, in order; the module reaches each worker once; a chunk that
-fails once is retried, and one that keeps failing costs only its own runs."""
+numbers as the local run, in order, also for a floating base (nq != nv); the module
+reaches each worker once; a chunk that fails once is retried, and one that keeps failing
+costs only its own runs; two workers installing the same module keep the first copy."""
 
 from __future__ import annotations
 
+import hashlib
 import os
+import sysconfig
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +15,10 @@ import pytest
 from distributed import Client, LocalCluster
 
 import gagen
+from gagen.building.cache import install_received_module
 from gagen.sim.batch import STATUS_CHUNK_FAILED
+
+URDF = Path(__file__).resolve().parent / "data" / "urdf"
 
 N = 10
 RNG = np.random.default_rng(4)
@@ -69,6 +75,49 @@ def test_results_are_identical_to_the_local_run_and_in_order(client, rrr, local,
     # each worker process imported the module once, whatever the number of chunks
     assert sorted(_worker_loads(client).values()) == [1, 1]
     assert any((cache_dir / "received").iterdir())
+
+
+def test_a_floating_base_gives_the_local_run_s_numbers(client):
+    """q has nq = nv + 1 entries (the base's quaternion): the cluster's results have the
+    shapes and the very numbers of the threads' run."""
+    dyn = gagen.load(URDF / "double_pendulum.urdf", floating_base=True)
+    assert dyn.nq == dyn.nv + 1
+    rng = np.random.default_rng(7)
+    q0 = np.tile(dyn.neutral(), (6, 1))
+    quaternions = rng.normal(size=(6, 4))
+    q0[:, 3:7] = quaternions / np.linalg.norm(quaternions, axis=1, keepdims=True)
+    q0[:, 7:] = rng.uniform(-1, 1, (6, dyn.nq - 7))
+    v0 = rng.normal(size=(6, dyn.nv))
+    for method, options in (("dopri5", {}), ("rk4", {"h": 1e-3})):
+        local = gagen.simulate_batch(dyn, (0.0, 0.5), q0, v0, method=method, threads=2,
+                                     **options)
+        res = gagen.simulate_batch(dyn, (0.0, 0.5), q0, v0, method=method, client=client,
+                                   chunk_size=2, **options)
+        assert res.q.shape == (6, local.t.size, dyn.nq) and res.qd.shape[-1] == dyn.nv
+        assert local.ok.all() and res.stats["chunks"] == 3
+        assert_same(res, local)
+
+
+def test_a_second_install_of_a_received_module_keeps_the_first(tmp_path, monkeypatch):
+    """Two workers of one machine receive the same module at once: the second finds the
+    first's copy only after writing its own, and must not discard it (the first may be
+    importing it: 'cannot open shared object file')."""
+    from gagen.building import cache
+
+    data = b"not really a module"
+    sha = hashlib.sha256(data).hexdigest()
+    name = "gagen_x" + sysconfig.get_config_var("EXT_SUFFIX")
+    first = install_received_module(tmp_path, name, data, sha)
+    inode = first.stat().st_ino
+    looks = []
+
+    def late(entry, module_file, real=cache.cached_module_is_intact):
+        looks.append(entry)  # the second's first look: the first's copy is not there yet
+        return len(looks) > 1 and real(entry, module_file)
+
+    monkeypatch.setattr(cache, "cached_module_is_intact", late)
+    second = install_received_module(tmp_path, name, data, sha)
+    assert second == first and second.stat().st_ino == inode
 
 
 def test_default_chunks_and_rk4(client, rrr):

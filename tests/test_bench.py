@@ -264,6 +264,20 @@ def test_scaling_table_shows_both_cpp_peers():
     assert table.splitlines()[2].endswith("| 2.00 (0.9×, 2.0×) |")
 
 
+def test_centroidal_goal_is_judged_on_ccrba_and_dccrba():
+    from gagen.bench.centroidal import goal_notes
+
+    robot = "anymal (floating, nv = 18)"
+    rows = [{"quantity": f"{robot}: A_g", "implementation": "Pinocchio", "ratio": 1.1},
+            {"quantity": f"{robot}: A_g", "implementation": "Pinocchio ccrba (A_g and h_g)",
+             "ratio": 2.1},
+            {"quantity": f"{robot}: A_g and its bias d/dt A_g qd",
+             "implementation": "Pinocchio", "ratio": 1.2}]
+    first, second = goal_notes(rows)
+    assert "ccrba" in first and first.endswith("met (2.10x).") and "NOT" not in first
+    assert "dccrba" in second and second.endswith("NOT met (1.20x).")
+
+
 # --------------------------------------------------- the derivatives' floating-base peers
 
 def test_derivative_goal_and_build_notes_and_the_casadi_table():

@@ -18,14 +18,17 @@ from gagen.model.model import (
     INERTIA_DEFINITE_TOLERANCE,
     INERTIA_TRIANGLE_TOLERANCE,
     check_inertia,
+    round_off_floor,
 )
 from gagen.model.modelfile import parse_model_text
 from gagen.model.resolve import resolve_model
+from gagen.model.urdf import parse_urdf_text
 
 ALLEGRO = Path(__file__).resolve().parent / "data" / "urdf" / "allegro_right_hand.urdf"
 # The links whose moments break the triangle inequality (a copy of one finger's tip link
 # design in each finger, and the thumb's tip)
-ALLEGRO_DEFECTS = ("link_3.0", "link_7.0", "link_11.0", "link_15.0")
+# in coordinate order: Pinocchio's, where the thumb's joint_12.0 sorts before joint_4.0
+ALLEGRO_DEFECTS = ("link_3.0", "link_15.0", "link_7.0", "link_11.0")
 
 
 def principal(a: float, b: float, c: float) -> np.ndarray:
@@ -78,6 +81,57 @@ def test_physical_inertia_and_rounding_pass_silently(moments):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         check_inertia(principal(*moments), "robot.urdf", "link 'l1'", strict=True)
+
+
+# --------------------------------------------------------------- round-off around zero
+
+# example-robot-data's icub.urdf, link r_hip_2: a point mass written with round-off
+ICUB_HIP = {"mass": 0.526, "com": 0.03045, "moments": (-5.42101e-20, -5.42101e-20, 0.0)}
+
+
+def test_round_off_around_a_zero_inertia_is_no_defect():
+    """A point mass's largest moment is zero, so no defect is small relative to it: the
+    floor tied to the body's mass and size (1e-9 of m l^2) accepts round-off there."""
+    floor = round_off_floor(ICUB_HIP["mass"], ICUB_HIP["com"])
+    assert floor == pytest.approx(1e-9 * 0.526 * 0.03045 ** 2)
+    tensor = np.diag(ICUB_HIP["moments"])
+    with pytest.raises(ModelError, match="not positive semi-definite"):
+        check_inertia(tensor, "icub.urdf", "link 'r_hip_2'")  # no floor: refused
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_inertia(tensor, "icub.urdf", "link 'r_hip_2'", strict=True, floor=floor)
+        for moments in ((0.0, 0.0, 0.0), (0.0, 1e-4, 1e-4), (-1e-19, 1e-4, 1e-4)):  # point,
+            check_inertia(principal(*moments), "robot.urdf", "link 'l1'", strict=True,
+                          floor=floor)  # rod, rod with round-off
+    # the floor is at least 1 cm's worth: a mass centre at the origin does not remove it
+    assert round_off_floor(0.526, 0.0) == pytest.approx(1e-9 * 0.526 * 1e-4)
+
+
+@pytest.mark.parametrize("moments, defect", [
+    ((-1e-9, 0.0, 0.0), "not positive semi-definite"),  # 2000 floors below zero
+    ((0.0, 0.0, 1e-9), "triangle inequality"),  # a rod about its own axis only
+])
+def test_a_defect_beyond_the_floor_is_still_refused(moments, defect):
+    floor = round_off_floor(ICUB_HIP["mass"], ICUB_HIP["com"])
+    with pytest.raises(ModelError, match=defect):
+        check_inertia(principal(*moments), "robot.urdf", "link 'l1'", floor=floor)
+
+
+def test_a_urdf_point_mass_with_round_off_loads_silently():
+    ixx, iyy, izz = ICUB_HIP["moments"]
+    text = f"""<robot name="hip"><link name="base"/>
+      <link name="hip"><inertial><mass value="{ICUB_HIP['mass']}"/>
+        <origin xyz="0 0 {ICUB_HIP['com']}"/>
+        <inertia ixx="{ixx}" iyy="{iyy}" izz="{izz}" ixy="0" ixz="0" iyz="0"/></inertial></link>
+      <link name="flange"/>
+      <joint name="j" type="revolute"><parent link="base"/><child link="hip"/>
+        <axis xyz="1 0 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+      <joint name="weld" type="fixed"><parent link="hip"/><child link="flange"/></joint>
+    </robot>"""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model = parse_urdf_text(text, "hip.urdf", strict=True)
+    assert model.dof == 1 and model.parameters["m_hip"] == ICUB_HIP["mass"]
 
 
 # ------------------------------------------------------------------------ the Allegro hand

@@ -22,9 +22,17 @@ from gagen.sim.controllers import paper_controller
 from gagen.sim.simulate import simulate
 
 GOLDEN = REPO / "generated" / "rrr"
-UPDATE_HINT = ("the generated C of 'rrr' changed; if that is intended, update the golden files "
-               "with:  python -m gagen build rrr --out generated/rrr   (or GAGEN_UPDATE_GOLDEN=1 "
-               "pytest tests/test_codegen.py)")
+UPDATE = ("python -m gagen build rrr --out generated/rrr   (or GAGEN_UPDATE_GOLDEN=1 pytest "
+          "tests/test_codegen.py)")
+GENERATOR_CHANGED = ("the generator changed (its code or templates under symbolic/ and "
+                     "codegen/, or the model rrr, or gagen's version): its key is {new}, the "
+                     "golden files in generated/rrr were written with {old}, and its C for "
+                     "'rrr' differs from them{files}. If that change is intended, update the "
+                     "golden files with:  " + UPDATE)
+EDITED = ("generated/rrr/{name} differs from what the generator writes under the same key "
+          "({new}): the golden file was edited by hand, or generation is not reproducible; "
+          "restore it with:  " + UPDATE)
+KEY_LINE = re.compile(r'"KEY", "([0-9a-f]{64})"')
 needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed")
 
 
@@ -32,6 +40,29 @@ def rrr_code():
     model = gagen.resolve_model("rrr")
     key = source_key(model)
     return generate(gagen.derive(model), module_name_for(model, key), key)
+
+
+def golden_mismatch(files: dict[str, str], folder=GOLDEN) -> str | None:
+    """Why the generated files differ from the golden ones in `folder` (None if they do
+    not): the generator's key changed (its module.c carries the key, which hashes the
+    generator's code and templates), or a golden file differs under the same key."""
+    committed = {p.name for p in folder.iterdir() if p.suffix in (".c", ".h", ".pyx")
+                 and not (p.suffix == ".c" and p.name.startswith("gagen_"))}
+    differing = sorted(name for name in set(files) | committed
+                       if name not in files or name not in committed
+                       or (folder / name).read_text() != files[name])
+    if not differing:
+        return None
+    new = KEY_LINE.search(files[MODULE_FILE]).group(1)
+    old = KEY_LINE.search((folder / MODULE_FILE).read_text()) \
+        if MODULE_FILE in committed else None
+    if old is None or old.group(1) != new:
+        others = [name for name in differing if name != MODULE_FILE]
+        listed = f" ({', '.join(others)} besides module.c's key)" if others else \
+            " (only in module.c's key)"
+        return GENERATOR_CHANGED.format(new=new[:12], old=old.group(1)[:12] if old else
+                                        "no key", files=listed)
+    return EDITED.format(name=", ".join(differing), new=new[:12])
 
 
 def test_generated_rrr_matches_golden_files():
@@ -42,11 +73,71 @@ def test_generated_rrr_matches_golden_files():
         GOLDEN.mkdir(parents=True, exist_ok=True)
         for name, text in code.files.items():
             (GOLDEN / name).write_text(text)
-    committed = {p.name for p in GOLDEN.iterdir() if p.suffix in (".c", ".h", ".pyx")
-                 and not (p.suffix == ".c" and p.name.startswith("gagen_"))}
-    assert committed == set(code.files), UPDATE_HINT
+    mismatch = golden_mismatch(code.files)
+    assert mismatch is None, mismatch
+
+
+def test_the_golden_test_says_what_changed(tmp_path, monkeypatch):
+    """A new generator (another key in module.c) is named as such, with the files whose C
+    changed; a golden file edited under the same key is named as edited."""
+    from gagen.building import builder
+
+    code = rrr_code()
+    golden = tmp_path / "golden"
+    golden.mkdir()
     for name, text in code.files.items():
-        assert (GOLDEN / name).read_text() == text, f"{name}: {UPDATE_HINT}"
+        (golden / name).write_text(text)
+    assert golden_mismatch(code.files, golden) is None
+    monkeypatch.setattr(builder, "generator_digest", lambda: "a changed generator")
+    changed = rrr_code()
+    message = golden_mismatch(changed.files, golden)
+    assert message.startswith("the generator changed") and "update the golden" in message
+    assert "edited" not in message and "(only in module.c's key)" in message
+    assert KEY_LINE.search(changed.files[MODULE_FILE]).group(1)[:12] in message
+    (golden / "rhs.c").write_text(code.files["rhs.c"] + "/* by hand */\n")
+    message = golden_mismatch(code.files, golden)
+    assert message.startswith("generated/rrr/rhs.c differs") and "edited by hand" in message
+    assert "(rhs.c besides module.c's key)" in golden_mismatch(changed.files, golden)
+
+
+def test_every_template_is_in_the_generator_key(tmp_path, monkeypatch):
+    """Editing any file under codegen/templates (.h, .c, .j2; a file of any other kind
+    there would fail this test until the key covers it) changes the generator's digest and
+    with it the key of every build and of the index: the build key (source_key) and the
+    input key (input_key). Checked on a copy of the stages the keys read."""
+    from types import SimpleNamespace
+
+    from gagen.building import cache
+    from gagen.building.builder import source_key
+
+    source = REPO / "src" / "gagen"
+    copy = tmp_path / "gagen"
+    for package in cache.PIPELINE_PACKAGES:
+        shutil.copytree(source / package, copy / package,
+                        ignore=shutil.ignore_patterns("__pycache__"))
+    model = gagen.resolve_model("rrr")
+
+    def keys() -> tuple[str, str]:
+        cache._packages_digest.cache_clear()
+        return source_key(model), cache.input_key("rrr", ["-O3"])
+
+    templates = sorted(p for p in (copy / "codegen" / "templates").rglob("*") if p.is_file())
+    assert len(templates) >= 20 and {p.suffix for p in templates} == {".h", ".c", ".j2"}
+    try:
+        real = keys()
+        monkeypatch.setattr(cache, "resources", SimpleNamespace(
+            files=lambda name: copy / name.split(".")[-1]))
+        assert keys() == real  # the copy is hashed as the package is
+        for template in templates:
+            text = template.read_bytes()
+            template.write_bytes(text + b"\n")
+            edited = keys()
+            template.write_bytes(text)
+            assert edited[0] != real[0] and edited[1] != real[1], template.name
+    finally:
+        monkeypatch.undo()
+        cache._packages_digest.cache_clear()
+    assert keys() == real
 
 
 def test_generation_is_byte_identical_across_processes(tmp_path):

@@ -19,6 +19,7 @@ import pytest
 import sympy as sp
 from conftest import SHARED_URDF
 from random_trees import random_model
+from test_joint_terms import with_random_joint_terms
 
 import gagen
 from gagen import NonFiniteStateError, SingularMassMatrixError
@@ -40,6 +41,10 @@ CASES = {
     "rrr-recursive": ("rrr", "recursive", True),
     **{f"random{s}": (f"random:{s}", "auto", True) for s in RANDOM_TREE_SEEDS},
     "random7-recursive": ("random:7", "recursive", True),
+    # two prismatic and two revolute joints (and a fixed one) with damping, friction and
+    # armature: 4 coordinates, so its derivatives take the analytical algorithm, whose M
+    # and forcing add the joint terms themselves (symbolic/derivatives.py)
+    "terms7": ("terms:7", "recursive", True),
     "chain5-recursive": ("chain:5", "recursive", True),
     "ur5": (str(SHARED_URDF / "ur5_robot.urdf"), "auto", False),
     "panda": (str(SHARED_URDF / "panda.urdf"), "auto", False),
@@ -49,6 +54,9 @@ CASES = {
 def _model(name: str):
     if name.startswith("random:"):
         return random_model(np.random.default_rng(int(name.split(":")[1])), 6, symbolic=True)
+    if name.startswith("terms:"):
+        rng = np.random.default_rng(int(name.split(":")[1]))
+        return with_random_joint_terms(random_model(rng, 5, symbolic=True), rng, True)
     return resolve_model(name)
 
 
@@ -62,7 +70,7 @@ def lambdify_dynamics(case: str) -> LambdifyDynamics:
 def compiled_dynamics(case: str):
     """Both compiled modules of a case (the derivative module built up front)."""
     name, derivation, _ = CASES[case]
-    model = _model(name) if name.startswith("random:") else name
+    model = _model(name) if name.startswith(("random:", "terms:")) else name
     return gagen.load(model, derivation=derivation, derivatives=True)
 
 
@@ -72,7 +80,7 @@ def dynamics(case: str, backend: str):
 
 # The compiled cases of the default run; the others build two modules each (the Panda's
 # and the UR5's take half a minute to a minute on a busy 2-core machine): slow.
-COMPILED_DEFAULT = ("rrr", "rrr-recursive", "random7", "chain5-recursive")
+COMPILED_DEFAULT = ("rrr", "rrr-recursive", "random7", "chain5-recursive", "terms7")
 
 
 def backend_cases(cases, compiled=COMPILED_DEFAULT):
@@ -200,7 +208,7 @@ def central_difference(f, x, h=1e-6):
 
 
 @pytest.mark.parametrize("case, backend", backend_cases(
-    ["rrr", "rrr-recursive", "random4", "random7", "chain5-recursive"]))
+    ["rrr", "rrr-recursive", "random4", "random7", "chain5-recursive", "terms7"]))
 def test_matches_central_differences(case, backend):
     dyn = dynamics(case, backend)
     rng = np.random.default_rng(5)
@@ -234,7 +242,7 @@ def test_matches_central_differences(case, backend):
 # --- the Coriolis matrix -------------------------------------------------------------
 
 @pytest.mark.parametrize("case, backend", backend_cases(
-    ["rrr", "rrr-recursive", "random1", "random12", "chain5-recursive", "panda"]))
+    ["rrr", "rrr-recursive", "random1", "random12", "chain5-recursive", "panda", "terms7"]))
 def test_coriolis_matrix_properties(case, backend):
     """C qd = the velocity terms; Mdot - 2C is skew-symmetric, with Mdot from central
     differences along qd; and dtau/dqd = 2C (the symmetry of the Christoffel symbols), plus

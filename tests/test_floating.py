@@ -5,9 +5,11 @@ parse, nothing of gagen's shared) for the shared robots, and gagen's Pinocchio b
 (`gagen.reference.pinocchio`) for random floating trees. Checked at random states to
 1e-9 relative: M, forward and inverse dynamics, gravity, energy, integrate, difference,
 every frame's placement, velocity and Jacobian (LOCAL_WORLD_ALIGNED), and aba / rnea with
-external forces. Then the simulations: a torque-free tumbling body keeps its energy and a
-unit quaternion, gagen's dopri5 takes SciPy RK45's steps, and a quadruped standing on four
-feet (contact forces by least squares on the feet's Jacobians) stays still.
+external forces; integrate and difference up to and at a half turn of the base. Then the
+simulations: a torque-free tumbling body keeps its energy and a unit quaternion and turns
+as Pinocchio's own integration of it does, gagen's dopri5 takes SciPy RK45's steps, and a
+quadruped standing on four feet (contact forces by least squares on the feet's Jacobians)
+stays still.
 """
 
 from __future__ import annotations
@@ -44,8 +46,8 @@ class Reference:
 
     def __init__(self, dyn, model):
         self.model, self.data = model, model.createData()
-        if hasattr(model, "gagen_order"):  # gagen's builder: gagen's index of each of
-            # Pinocchio's entries; here Pinocchio's index of each of gagen's, its inverse
+        if hasattr(model, "gagen_order"):  # gagen's builder: gagen's index of Pinocchio's k-th
+            # entry; v_order and q_order are the other way round: Pinocchio's index of ours
             self.v_order = np.argsort(model.gagen_order)
             self.q_order = np.argsort(model.gagen_configuration_order)
         else:  # Pinocchio's URDF parse: match the joints by name, the base first
@@ -167,11 +169,10 @@ def _ours_q(ref: Reference, q_pin) -> np.ndarray:
 # --------------------------------------------------------------------- the real robots
 
 @pytest.fixture(scope="module")
-def anymal(tmp_path_factory):
+def anymal(cache_dir):  # the session's cache: test_centroidal and test_taskspace load it
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", gagen.InertiaWarning)
-        return gagen.load(URDF / "anymal_c.urdf", floating_base=True,
-                          cache_dir=tmp_path_factory.mktemp("cache"))
+        return gagen.load(URDF / "anymal_c.urdf", floating_base=True, cache_dir=cache_dir)
 
 
 def test_anymal_floating_matches_pinocchio(anymal):
@@ -282,20 +283,62 @@ bodies:
 """
 
 
+# the tumble: from a turned, displaced base; g = 0
+TUMBLE_Q0 = np.array([0.1, -0.2, 0.3, *(np.array([0.3, -0.5, 0.2, 0.8]) / math.sqrt(1.02)), 0.4])
+TUMBLE_V0 = np.array([0.3, 0.0, 0.1, 1.0, 2.0, 0.5, 3.0])
+TUMBLE_T = np.linspace(0.0, 5.0, 501)
+
+
+@pytest.fixture(scope="module")
+def tumble_reference():
+    """The tumble integrated with Pinocchio alone, by SciPy's DOP853 at 1e-13: aba for the
+    accelerations, and its tangent map (q' = T(q) v, Pinocchio's integrate differentiated)
+    for the configuration's rate, so the base's velocity moves its quaternion as Pinocchio
+    says, in the base's frame."""
+    from scipy.integrate import solve_ivp
+
+    from gagen.model.modelfile import parse_model_text
+
+    ref = Reference(None, pinocchio_model(parse_model_text(TUMBLER, "tumbler.yaml"),
+                                          {"g": 0.0}))
+    m, d, nq = ref.model, ref.data, ref.model.nq
+
+    def rate(t, y):
+        q, v = y[:nq].copy(), y[nq:]
+        q[3:7] /= np.linalg.norm(q[3:7])
+        qp, vp = ref.q(q), ref.v(v)
+        qdd = ref.ours(pin.aba(m, d, qp, vp, np.zeros(m.nv)))
+        return np.concatenate([_ours_q(ref, pin.tangentMap(m, qp) @ vp), qdd])
+
+    y0 = np.concatenate([TUMBLE_Q0, TUMBLE_V0])
+    sol = solve_ivp(rate, (0.0, 5.0), y0, method="DOP853", rtol=1e-13, atol=1e-13,
+                    t_eval=TUMBLE_T)
+    assert sol.success, sol.message
+    return sol.y[:nq].T
+
+
 @pytest.mark.parametrize("method", ["dopri5", "RK45", "rk4"])
-def test_torque_free_tumbling_keeps_energy_and_a_unit_quaternion(tumbler, method):
-    q0 = tumbler.neutral()
-    v0 = np.array([0.3, 0.0, 0.1, 1.0, 2.0, 0.5, 3.0])
+def test_torque_free_tumbling_keeps_energy_and_a_unit_quaternion(tumbler, tumble_reference,
+                                                                   method):
+    """Energy and a unit quaternion, and the motion itself: the base's orientation and
+    position and the hinge against Pinocchio's tumble (tumble_reference), so a quaternion
+    turned by the angular velocity in the wrong frame (world for body) fails."""
     options = {"h": 1e-3} if method == "rk4" else {"rtol": 1e-10, "atol": 1e-12}
-    result = gagen.simulate(tumbler, (0.0, 5.0), q0, v0, method=method, p={"g": 0.0},
-                            **options)
+    result = gagen.simulate(tumbler, (0.0, 5.0), TUMBLE_Q0, TUMBLE_V0, method=method,
+                            p={"g": 0.0}, **options)
     kinetic = tumbler.energy(result.q, result.qd, p={"g": 0.0})[0]
     assert np.abs(kinetic - kinetic[0]).max() < 1e-8 * kinetic[0]
     assert np.abs(np.linalg.norm(result.q[:, 3:7], axis=1) - 1).max() < 1e-14
     assert result.q.shape == (501, 8) and result.qd.shape == (501, 7)
     assert result.columns()[:3] == ["t", "base_x", "base_y"]
+    np.testing.assert_array_equal(result.t, TUMBLE_T)
     # the body really tumbled: its orientation changed by much more than the tolerance
     assert np.abs(result.q[-1, 3:7] - result.q[0, 3:7]).max() > 0.1
+    want = tumble_reference
+    sign = np.where(np.sum(result.q[:, 3:7] * want[:, 3:7], axis=1) < 0, -1.0, 1.0)
+    orientation = np.abs(result.q[:, 3:7] - sign[:, None] * want[:, 3:7]).max()
+    position = np.abs(result.q[:, [0, 1, 2, 7]] - want[:, [0, 1, 2, 7]]).max()
+    assert orientation < 1e-8 and position < 1e-8, (orientation, position)
 
 
 def test_dopri5_takes_scipy_rk45_steps_with_a_floating_base(tumbler):
@@ -422,3 +465,80 @@ def test_frames_accept_stacked_states_and_return_fresh_arrays(anymal):
     again = anymal.frame_jacobian(Q[1], "LF_FOOT")
     assert not np.shares_memory(first, again)
     assert math.isclose(np.linalg.det(R[0]), 1.0, rel_tol=1e-12)
+
+
+# ------------------------------------------------------------ integrate and difference
+
+# relative rotations of the base: none, tiny, a turn of 1 rad, and within 1e-3 .. 1e-12 of a
+# half turn and exactly one, where the angle from a rotation matrix's trace loses half its
+# digits and a symmetric matrix gives the axis only up to its entries' signs
+HALF_TURN = np.pi
+ANGLES = (0.0, 1e-12, 1e-7, 1e-3, 1.0, HALF_TURN - 1e-3, HALF_TURN - 1e-6, HALF_TURN - 1e-7,
+          HALF_TURN - 1e-9, HALF_TURN - 1e-12, HALF_TURN)
+# axes with mixed signs (a half turn's matrix shows only |n_i| and the products n_i n_j)
+AXES = ((1.0, -1.0, 0.0), (0.0, 0.0, -1.0), (0.3, -0.5, 0.8), (-2.0, 1.0, 3.0))
+
+
+@pytest.fixture(scope="module")
+def anymal_reference(anymal):
+    model = pin.buildModelFromUrdf(str(URDF / "anymal_c.urdf"), pin.JointModelFreeFlyer())
+    return Reference(anymal, model)
+
+
+def turned(q, angle: float, axis) -> np.ndarray:
+    """q with its base turned by `angle` about `axis` (in the base's frame): the quaternion
+    q ⊗ (sin(angle/2) n, cos(angle/2)), written out here."""
+    n = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    r = np.append(np.sin(angle / 2) * n, np.cos(angle / 2))
+    (x, y, z, w), (a, b, c, d) = q[3:7], r
+    out = np.array(q, dtype=float)
+    out[3:7] = [w * a + d * x + y * c - z * b, w * b + d * y + z * a - x * c,
+                w * c + d * z + x * b - y * a, w * d - x * a - y * b - z * c]
+    return out
+
+
+def assert_same_configuration(a, b, what: str) -> None:
+    """Equal positions and joints, and quaternions equal up to sign (one orientation)."""
+    a, b = np.asarray(a), np.asarray(b)
+    plain = np.r_[0:3, 7:a.size]
+    np.testing.assert_allclose(a[plain], b[plain], rtol=0, atol=1e-12, err_msg=what)
+    sign = 1.0 if np.dot(a[3:7], b[3:7]) >= 0 else -1.0
+    np.testing.assert_allclose(a[3:7], sign * b[3:7], rtol=0, atol=1e-12, err_msg=what)
+
+
+@pytest.mark.parametrize("angle", ANGLES, ids=lambda a: f"pi-{np.pi - a:.0e}" if a > 3 else
+                         f"{a:.0e}")
+def test_integrate_and_difference_near_a_half_turn(anymal, anymal_reference, angle):
+    """integrate(q0, difference(q0, q1)) == q1 and difference(q0, integrate(q0, v)) == v
+    (to 1e-12) for base rotations up to and at a half turn, both against Pinocchio's
+    integrate and difference; q1's quaternion and its negative give the same difference.
+    At exactly a half turn w and -w are one rotation: either answer must reach q1."""
+    dyn, ref = anymal, anymal_reference
+    m = ref.model
+    rng = np.random.default_rng(31)
+    for axis in AXES:
+        q0, u, _ = random_state(dyn, rng)
+        q1 = random_state(dyn, rng)[0]
+        q1[3:7] = turned(q0, angle, axis)[3:7]
+        v = dyn.difference(q0, q1)
+        assert abs(np.linalg.norm(v[3:6]) - angle) <= 1e-12, "the angle of the rotation"
+        assert_same_configuration(dyn.integrate(q0, v), q1, "integrate(q0, difference)")
+        flipped = q1.copy()
+        flipped[3:7] *= -1
+        np.testing.assert_allclose(dyn.difference(q0, flipped), v, rtol=0, atol=1e-12)
+        theirs = ref.ours(pin.difference(m, ref.q(q0), ref.q(q1)))
+        if angle < HALF_TURN:
+            np.testing.assert_allclose(v, theirs, rtol=0, atol=1e-12, err_msg="difference")
+        else:
+            assert_same_configuration(dyn.integrate(q0, theirs), q1, "Pinocchio's answer")
+        # the inverse: a velocity whose rotation vector has this length
+        u[3:6] = angle * np.asarray(axis) / np.linalg.norm(axis)
+        moved = dyn.integrate(q0, u)
+        assert_same_configuration(moved, _ours_q(ref, pin.integrate(m, ref.q(q0), ref.v(u))),
+                                  "integrate")
+        back = dyn.difference(q0, moved)
+        if angle < HALF_TURN:
+            np.testing.assert_allclose(back, u, rtol=0, atol=1e-12, err_msg="the inverse")
+        else:
+            assert abs(np.linalg.norm(back[3:6]) - HALF_TURN) <= 1e-12
+            assert_same_configuration(dyn.integrate(q0, back), moved, "the inverse at pi")

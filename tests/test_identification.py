@@ -95,6 +95,36 @@ def test_group_columns_of_a_known_matrix():
     assert g.text() == "a = a + 2*b + d\nc = c - d"
 
 
+def test_base_parameters_at_the_edge_of_identifiability():
+    """A weakly excited column, 1e-6 (relative) from the span of the others, is independent
+    (a base parameter of its own: the smallest singular value of the kept columns is then
+    about 1e-6 of the largest); one 1e-12 from it is dependent and regrouped (base.TOLERANCE
+    = 1e-8 lies between). Columns of very different scales: the test is on unit-norm ones."""
+    rng = np.random.default_rng(17)
+    strong = rng.normal(size=(400, 5)) * [1e3, 1.0, 1e-2, 5.0, 0.3]
+    off_span = np.linalg.qr(np.column_stack([strong, rng.normal(size=(400, 2))]))[0][:, 5:]
+
+    def near_span(coefficients, distance, direction):
+        column = strong @ coefficients
+        return column + distance * np.linalg.norm(column) * direction
+
+    weak = near_span([1e-3, 0.5, -20.0, 0.1, 1.0], 1e-6, off_span[:, 0])
+    dependent = near_span([2e-3, -0.3, 50.0, 0.2, 3.0], 1e-12, off_span[:, 1])
+    names = ["a", "b", "c", "d", "e", "weak", "dependent"]
+    W = np.column_stack([strong, weak, dependent])
+    g = group_columns(W, names)
+    assert g.names == ["a", "b", "c", "d", "e", "weak"]
+    unit = W[:, g.independent] / np.linalg.norm(W[:, g.independent], axis=0)
+    singular = np.linalg.svd(unit, compute_uv=False)
+    assert 1e-7 < singular[-1] / singular[0] < 1e-5
+    # the dependent column is regrouped into the strong ones, with its coefficients
+    np.testing.assert_allclose(g.matrix[:5, 6], [2e-3, -0.3, 50.0, 0.2, 3.0], rtol=1e-6)
+    assert g.matrix[5, 6] == 0
+    pi = rng.normal(size=7)
+    np.testing.assert_allclose(W[:, g.independent] @ (g.matrix @ pi), W @ pi, rtol=1e-9,
+                               atol=1e-9 * np.abs(W @ pi).max())
+
+
 # ----------------------------------------------------------------------- identification
 
 
@@ -132,6 +162,42 @@ def test_identification_predicts_the_payload_robot_within_the_noise():
     truth = dyn.base_parameters(PAYLOAD)
     z = np.abs(result.values - truth) / result.std
     assert 0.5 < np.mean(z < 1) and np.mean(z < 3) > 0.95
+
+
+def test_reported_deviations_match_the_spread_over_many_draws():
+    """The paper's robot at 12 fixed states, torques with known noise (0.5, 2, 1) and the
+    weights 1 / noise^2, four of joint 1's torques left out (weight 0): over 2000 draws of
+    the noise the estimates scatter as the reported standard deviations say (within 5 %,
+    each of the 22 base parameters), sigma^2 averages 1, and they are unbiased. With
+    m = 32 weighted rows and r = 22 parameters, sigma^2 must divide by m - r = 10: by m it
+    would average 0.31, and the deviations come out 0.56 of the spread."""
+    dyn = gagen.load("rrr")
+    rng = np.random.default_rng(23)
+    q, qd, qdd = states(dyn, rng, 12)
+    exact = dyn.inverse_dynamics(q, qd, qdd)
+    noise = np.array([0.5, 2.0, 1.0])
+    weights = np.tile(1 / noise**2, (12, 1))
+    weights[:4, 0] = 0.0
+    draws = 2000
+    values, variances, sigma2 = [], [], []
+    for _ in range(draws):
+        result = gagen.identify(dyn, q, qd, qdd, exact + rng.normal(size=exact.shape) * noise,
+                                weights=weights)
+        values.append(result.values)
+        variances.append(result.std**2)
+        sigma2.append(result.sigma**2)
+    r = result.grouping.count
+    assert (r, np.count_nonzero(weights)) == (22, 32)
+    spread = np.std(values, axis=0, ddof=1)
+    reported = np.sqrt(np.mean(variances, axis=0))
+    np.testing.assert_allclose(reported / spread, 1.0, atol=0.05)
+    assert np.mean(sigma2) == pytest.approx(1.0, abs=0.03)
+    bias = np.abs(np.mean(values, axis=0) - dyn.base_parameters())
+    assert (bias < 0.1 * spread).all()  # 4.5 standard errors of the mean
+    # the covariance is sigma^2 times the inverse of the weighted normal matrix
+    A = dyn.base_regressor(q, qd, qdd).reshape(-1, r) * np.sqrt(weights).reshape(-1, 1)
+    np.testing.assert_allclose(result.covariance / result.sigma**2, np.linalg.inv(A.T @ A),
+                               rtol=1e-8, atol=1e-12 * np.abs(np.linalg.inv(A.T @ A)).max())
 
 
 def test_identify_checks_its_inputs():

@@ -107,7 +107,10 @@ def test_split_kernels_compute_what_whole_kernels_compute(split_and_whole):
     p = model.parameter_vector() * rng.uniform(0.8, 1.2, size=len(model.parameters))
     for name, args in (("mass_matrix", (q,)), ("forcing", (q, qd, tau)),
                        ("forward_dynamics", (q, qd, tau)), ("inverse_dynamics", (q, qd, tau)),
-                       ("gravity", (q,)), ("energy", (q, qd))):
+                       ("gravity", (q,)), ("energy", (q, qd)),
+                       # straight-line code that reads the placements (centroidal.c)
+                       ("center_of_mass", (q,)), ("centroidal_map", (q,)),
+                       ("com_jacobian", (q,))):
         a = np.asarray(getattr(pieces, name)(*args, p=p))
         b = np.asarray(getattr(whole, name)(*args, p=p))
         c = np.asarray(getattr(reference, name)(*args, p=p))

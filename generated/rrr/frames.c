@@ -354,32 +354,37 @@ static void gagen_frame_offset(const double *p, int k, double *F)
     (void)p;
 }
 
-/* The placements (as `placements` writes them, at X + 15 b) of body b and its ancestors
- * only: a frame's kinematics reads no other body. */
+/* The placement (as `placements` writes it, at X + 15 c) of body c, its parent placed */
+static void gagen_place_body(const double *q, const double *p, int c, double *X)
+{
+    const int parent = gagen_parent[c];
+    double T[15];
+    double *R = X + 15 * c, *pos = R + 9, *axis = R + 12;
+    int i, j;
+    gagen_joint_transform(q, p, c, T);
+    if (parent < 0) {
+        for (i = 0; i < 12; ++i) R[i] = T[i];
+    } else {
+        const double *Rp = X + 15 * parent, *pp = Rp + 9;
+        for (i = 0; i < 3; ++i) {
+            for (j = 0; j < 3; ++j)
+                R[3 * i + j] = Rp[3 * i] * T[j] + Rp[3 * i + 1] * T[3 + j]
+                               + Rp[3 * i + 2] * T[6 + j];
+            pos[i] = pp[i] + Rp[3 * i] * T[9] + Rp[3 * i + 1] * T[10]
+                     + Rp[3 * i + 2] * T[11];
+        }
+    }
+    for (i = 0; i < 3; ++i)
+        axis[i] = R[3 * i] * T[12] + R[3 * i + 1] * T[13] + R[3 * i + 2] * T[14];
+}
+
+/* The placements of body b and its ancestors only: a frame's kinematics reads no other
+ * body. */
 static void gagen_path_placements(const double *q, const double *p, int b, double *X)
 {
-    int path[GAGEN_FR_NB], m = 0, i, j;
+    int path[GAGEN_FR_NB], m = 0;
     for (; b >= 0; b = gagen_parent[b]) path[m++] = b;
-    while (m-- > 0) {
-        const int c = path[m], parent = gagen_parent[c];
-        double T[15];
-        double *R = X + 15 * c, *pos = R + 9, *axis = R + 12;
-        gagen_joint_transform(q, p, c, T);
-        if (parent < 0) {
-            for (i = 0; i < 12; ++i) R[i] = T[i];
-        } else {
-            const double *Rp = X + 15 * parent, *pp = Rp + 9;
-            for (i = 0; i < 3; ++i) {
-                for (j = 0; j < 3; ++j)
-                    R[3 * i + j] = Rp[3 * i] * T[j] + Rp[3 * i + 1] * T[3 + j]
-                                   + Rp[3 * i + 2] * T[6 + j];
-                pos[i] = pp[i] + Rp[3 * i] * T[9] + Rp[3 * i + 1] * T[10]
-                         + Rp[3 * i + 2] * T[11];
-            }
-        }
-        for (i = 0; i < 3; ++i)
-            axis[i] = R[3 * i] * T[12] + R[3 * i + 1] * T[13] + R[3 * i + 2] * T[14];
-    }
+    while (m-- > 0) gagen_place_body(q, p, path[m], X);
 }
 
 /* (R, pos) of frame k from the placements X and frame k's offset Fk (12 values) */
@@ -459,6 +464,416 @@ static void gagen_place_frame(const double *q, const double *p, int k, double *X
     gagen_frame_pose(X, Fk, k, R, pos);
 }
 
+/* ---------------------------------------------------------------------------------------
+ * Task space: frames' velocities, Jacobians, accelerations and Jacobians' time variation in
+ * Pinocchio's three references, and the operational-space inertia of frames. The same
+ * arithmetic is in NumPy in gagen.runtime.taskspace, whose docstring has the recursion.
+ * ------------------------------------------------------------------------------------- */
+
+#define GAGEN_TS_REFERENCE_OK(r) ((r) == GAGEN_WORLD || (r) == GAGEN_LOCAL \
+                                  || (r) == GAGEN_LOCAL_WORLD_ALIGNED)
+#define GAGEN_TS_NOT_POSITIVE_DEFINITE RRR_ERR_NOT_POSITIVE_DEFINITE
+#define GAGEN_TS_NONFINITE RRR_ERR_NONFINITE
+#define GAGEN_TS_SINGULAR_TASK RRR_ERR_SINGULAR_TASK
+/* a pivot of J M^-1 J^T's factorisation at most this fraction of its diagonal entry: the
+   rows are dependent (exactly, up to rounding) */
+#define GAGEN_TS_PIVOT 1e-11
+
+/* Per velocity coordinate, the one before it on its path to the world (-1: none): the
+ * sparsity of M, which the factorisation M = L^T D L keeps (no fill-in). */
+static const int gagen_dof_parent[GAGEN_FR_NV] = { -1, 0, 1 };
+
+/* c += k (a x b) */
+static void gagen_cross_add(const double *a, const double *b, double k, double *c)
+{
+    c[0] += k * (a[1] * b[2] - a[2] * b[1]);
+    c[1] += k * (a[2] * b[0] - a[0] * b[2]);
+    c[2] += k * (a[0] * b[1] - a[1] * b[0]);
+}
+
+/* A motion vector m (linear at the frame's origin pos, then angular; world axes: Pinocchio's
+ * LOCAL_WORLD_ALIGNED) in `reference`, in place: LOCAL turns it into the frame's axes R,
+ * WORLD moves its linear part to the world's origin. */
+static void gagen_motion_to(int reference, const double *R, const double *pos, double *m)
+{
+    int i;
+    if (reference == GAGEN_LOCAL) {
+        double t[6];
+        for (i = 0; i < 3; ++i) {
+            t[i] = R[i] * m[0] + R[3 + i] * m[1] + R[6 + i] * m[2];
+            t[3 + i] = R[i] * m[3] + R[3 + i] * m[4] + R[6 + i] * m[5];
+        }
+        for (i = 0; i < 6; ++i) m[i] = t[i];
+    } else if (reference == GAGEN_WORLD) {
+        gagen_cross_add(pos, m + 3, 1.0, m);
+    }
+}
+
+/* The joint of body c moves it relative to its parent by u (its origin's velocity) and w
+ * (angular velocity), world axes, at the rates `rate` (qd, or qdd for its acceleration
+ * terms); NULL rates: zero. */
+static void gagen_joint_motion(const double *X, int c, const double *rate, double *u, double *w)
+{
+    const double *R = X + 15 * c, *s = R + 12;
+    const int col = gagen_column[c];
+    int i;
+    for (i = 0; i < 3; ++i) u[i] = w[i] = 0.0;
+    if (rate == NULL) return;
+    if (gagen_kind[c] == 1) {
+        for (i = 0; i < 3; ++i) w[i] = s[i] * rate[col];
+    } else if (gagen_kind[c] == 2) {
+        for (i = 0; i < 3; ++i) u[i] = s[i] * rate[col];
+    } else if (gagen_kind[c] == 3) {  /* six rates in the body's frame */
+        for (i = 0; i < 3; ++i) {
+            u[i] = R[3 * i] * rate[col] + R[3 * i + 1] * rate[col + 1] + R[3 * i + 2] * rate[col + 2];
+            w[i] = R[3 * i] * rate[col + 3] + R[3 * i + 1] * rate[col + 4]
+                   + R[3 * i + 2] * rate[col + 5];
+        }
+    }
+}
+
+/* The motion of body b and its ancestors (placed in X), each after its parent: at V + 12 c
+ * its angular velocity, its origin's velocity, and with `accelerations` their rates (the
+ * classical accelerations) at qdd (NULL: 0), world axes:
+ *   omega = omega_p + w            v = v_p + omega_p x r + u
+ *   alpha = alpha_p + omega_p x w + S_w qdd
+ *   a = a_p + alpha_p x r + omega_p x (omega_p x r) + 2 omega_p x u + w x u + S_u qdd
+ * (r: the body's origin less its parent's; a joint's axes turn with its parent). */
+static void gagen_path_motion(const double *X, const double *qd, const double *qdd, int b,
+                              int accelerations, double *V)
+{
+    static const double rest[12] = {0.0};
+    int path[GAGEN_FR_NB], m = 0, i;
+    for (; b >= 0; b = gagen_parent[b]) path[m++] = b;
+    while (m-- > 0) {
+        const int c = path[m], parent = gagen_parent[c], kind = gagen_kind[c];
+        /* what is zero is skipped: the world's motion, u of a revolute or fixed joint,
+           w of a prismatic or fixed one */
+        const int turns = kind == 1 || kind == 3, slides = kind == 2 || kind == 3;
+        const double *P = parent < 0 ? rest : V + 12 * parent;
+        const double *o = X + 15 * c + 9, *op = parent < 0 ? rest : X + 15 * parent + 9;
+        double *out = V + 12 * c, u[3], w[3], r[3];
+        gagen_joint_motion(X, c, qd, u, w);
+        for (i = 0; i < 3; ++i) {
+            r[i] = o[i] - op[i];
+            out[i] = P[i] + w[i];
+            out[3 + i] = P[3 + i] + u[i];
+        }
+        if (parent >= 0) gagen_cross_add(P, r, 1.0, out + 3);
+        if (accelerations) {
+            double su[3], sw[3], wr[3] = {0.0, 0.0, 0.0};
+            gagen_joint_motion(X, c, qdd, su, sw);
+            for (i = 0; i < 3; ++i) {
+                out[6 + i] = P[6 + i] + sw[i];
+                out[9 + i] = P[9 + i] + su[i];
+            }
+            if (parent >= 0) {
+                gagen_cross_add(P, r, 1.0, wr);
+                if (turns) gagen_cross_add(P, w, 1.0, out + 6);
+                gagen_cross_add(P + 6, r, 1.0, out + 9);
+                gagen_cross_add(P, wr, 1.0, out + 9);
+                if (slides) gagen_cross_add(P, u, 2.0, out + 9);
+            }
+            if (kind == 3) gagen_cross_add(w, u, 1.0, out + 9);
+        }
+    }
+}
+
+/* Frame k's velocity vel (its origin's, then angular) and, if acc is not NULL, its
+ * classical acceleration (its origin's, then angular), world axes, from its body's motion V. */
+static void gagen_frame_motion(const double *X, const double *V, int k, const double *pos,
+                               double *vel, double *acc)
+{
+    const int b = gagen_frame_body[k];
+    int i;
+    for (i = 0; i < 6; ++i) {
+        vel[i] = 0.0;
+        if (acc != NULL) acc[i] = 0.0;
+    }
+    if (b < 0) return;  /* welded to the world */
+    {
+        const double *Vb = V + 12 * b, *o = X + 15 * b + 9;
+        double arm[3], wr[3] = {0.0, 0.0, 0.0};
+        for (i = 0; i < 3; ++i) {
+            arm[i] = pos[i] - o[i];
+            vel[i] = Vb[3 + i];
+            vel[3 + i] = Vb[i];
+        }
+        gagen_cross_add(Vb, arm, 1.0, vel);
+        if (acc == NULL) return;
+        gagen_cross_add(Vb, arm, 1.0, wr);
+        for (i = 0; i < 3; ++i) {
+            acc[i] = Vb[9 + i];
+            acc[3 + i] = Vb[6 + i];
+        }
+        gagen_cross_add(Vb + 6, arm, 1.0, acc);
+        gagen_cross_add(Vb, wr, 1.0, acc);
+    }
+}
+
+/* The time variation of the columns gagen_frame_columns gives (in its order), world axes:
+ * a joint's axis s turns with its body (ds = omega x s) and the frame's arm from the
+ * joint stretches at v_f - v, so [s x arm; s] changes by [ds x arm + s x (v_f - v); ds]
+ * and [s; 0] by [ds; 0]. */
+static void gagen_frame_column_rates(const double *X, const double *V, int k,
+                                     const double *pos, const double *vel, double *dcol)
+{
+    int b = gagen_frame_body[k], m = 0, i, r;
+    for (; b >= 0; b = gagen_parent[b]) {
+        const double *Rb = X + 15 * b, *o = Rb + 9, *axis = Rb + 12, *omega = V + 12 * b;
+        double arm[3], stretch[3];
+        if (gagen_kind[b] == 0) continue;
+        for (i = 0; i < 3; ++i) {
+            arm[i] = pos[i] - o[i];
+            stretch[i] = vel[i] - omega[3 + i];
+        }
+        for (r = 0; r < (gagen_kind[b] == 3 ? 6 : 1); ++r) {
+            double s[3], *d = dcol + 6 * m++;
+            const int turns = gagen_kind[b] == 1 || (gagen_kind[b] == 3 && r >= 3);
+            for (i = 0; i < 3; ++i) {
+                s[i] = gagen_kind[b] == 3 ? Rb[3 * i + r % 3] : axis[i];
+                d[i] = d[3 + i] = 0.0;
+            }
+            if (turns) {
+                gagen_cross_add(omega, s, 1.0, d + 3);
+                gagen_cross_add(d + 3, arm, 1.0, d);
+                gagen_cross_add(s, stretch, 1.0, d);
+            } else {
+                gagen_cross_add(omega, s, 1.0, d);
+            }
+        }
+    }
+}
+
+/* The placements of the marked bodies (each marked body's parent marked too), parents
+ * first: several frames' paths to the world share their common ancestors' work. */
+static void gagen_place_marked(const double *q, const double *p, const char *marked,
+                               double *X)
+{
+    int b;
+    for (b = 0; b < GAGEN_FR_NB; ++b)
+        if (marked[b]) gagen_place_body(q, p, b, X);
+}
+
+/* Marks frame k's body and its ancestors. */
+static void gagen_mark_path(int k, char *marked)
+{
+    int b;
+    for (b = gagen_frame_body[k]; b >= 0 && !marked[b]; b = gagen_parent[b]) marked[b] = 1;
+}
+
+/* The Jacobian of frame k (6 x NV, row-major) in `reference`, its path placed in X. */
+static void gagen_frame_jacobian_at(const double *p, const double *X, int k, int reference,
+                                    double *J)
+{
+    double Fk[12], R[9], pos[3], col[6 * GAGEN_FR_NV];
+    int cols[GAGEN_FR_NV], m, i, c;
+    gagen_frame_offset(p, k, Fk);
+    gagen_frame_pose(X, Fk, k, R, pos);
+    for (i = 0; i < 6 * GAGEN_FR_NV; ++i) J[i] = 0.0;
+    m = gagen_frame_columns(X, k, pos, col, cols);
+    for (c = 0; c < m; ++c) {
+        gagen_motion_to(reference, R, pos, col + 6 * c);
+        for (i = 0; i < 6; ++i) J[GAGEN_FR_NV * i + cols[c]] = col[6 * c + i];
+    }
+}
+
+int rrr_frame_jacobians(const double *q, const double *p, int count, const int *frames,
+                                int reference, double *J)
+{
+    double X[15 * GAGEN_FR_NB];
+    char marked[GAGEN_FR_NB] = {0};
+    int k;
+    if (count < 0 || !GAGEN_TS_REFERENCE_OK(reference)) return GAGEN_ERR_BAD_ARG;
+    for (k = 0; k < count; ++k) {
+        if (frames[k] < 0 || frames[k] >= GAGEN_FR_NF) return GAGEN_ERR_BAD_ARG;
+        gagen_mark_path(frames[k], marked);
+    }
+    gagen_place_marked(q, p, marked, X);
+    for (k = 0; k < count; ++k)
+        gagen_frame_jacobian_at(p, X, frames[k], reference, J + 6 * GAGEN_FR_NV * k);
+    return 0;
+}
+
+int rrr_frame_acceleration(const double *q, const double *qd, const double *qdd,
+                                   const double *p, int frame, int reference, int kind,
+                                   double *a)
+{
+    double X[15 * GAGEN_FR_NB], V[12 * GAGEN_FR_NB], R[9], pos[3], vel[6];
+    if (frame < 0 || frame >= GAGEN_FR_NF || !GAGEN_TS_REFERENCE_OK(reference)
+        || (kind != GAGEN_CLASSICAL && kind != GAGEN_SPATIAL))
+        return GAGEN_ERR_BAD_ARG;
+    gagen_place_frame(q, p, frame, X, R, pos);
+    gagen_path_motion(X, qd, qdd, gagen_frame_body[frame], 1, V);
+    gagen_frame_motion(X, V, frame, pos, vel, a);
+    /* the spatial acceleration at the frame's origin: its classical one less omega x v */
+    gagen_cross_add(vel + 3, vel, -1.0, a);
+    gagen_motion_to(reference, R, pos, a);
+    if (kind == GAGEN_CLASSICAL) {  /* plus omega x v of the velocity in `reference` */
+        gagen_motion_to(reference, R, pos, vel);
+        gagen_cross_add(vel + 3, vel, 1.0, a);
+    }
+    return 0;
+}
+
+int rrr_frame_bias_acceleration(const double *q, const double *qd, const double *p,
+                                        int frame, int reference, int kind, double *a)
+{
+    return rrr_frame_acceleration(q, qd, NULL, p, frame, reference, kind, a);
+}
+
+int rrr_frame_jacobian_time_variation(const double *q, const double *qd,
+                                              const double *p, int frame, int reference,
+                                              double *dJ)
+{
+    double X[15 * GAGEN_FR_NB], V[12 * GAGEN_FR_NB], R[9], pos[3], vel[6];
+    double col[6 * GAGEN_FR_NV], dcol[6 * GAGEN_FR_NV];
+    int cols[GAGEN_FR_NV], m, i, c;
+    if (frame < 0 || frame >= GAGEN_FR_NF || !GAGEN_TS_REFERENCE_OK(reference))
+        return GAGEN_ERR_BAD_ARG;
+    gagen_place_frame(q, p, frame, X, R, pos);
+    gagen_path_motion(X, qd, NULL, gagen_frame_body[frame], 0, V);
+    gagen_frame_motion(X, V, frame, pos, vel, NULL);
+    m = gagen_frame_columns(X, frame, pos, col, cols);
+    gagen_frame_column_rates(X, V, frame, pos, vel, dcol);
+    for (i = 0; i < 6 * GAGEN_FR_NV; ++i) dJ[i] = 0.0;
+    for (c = 0; c < m; ++c) {
+        double *j = col + 6 * c, *d = dcol + 6 * c;
+        if (reference == GAGEN_LOCAL) {  /* d/dt (R^T x) = R^T (dx/dt - omega x x) */
+            gagen_cross_add(vel + 3, j, -1.0, d);
+            gagen_cross_add(vel + 3, j + 3, -1.0, d + 3);
+            gagen_motion_to(GAGEN_LOCAL, R, pos, d);
+        } else if (reference == GAGEN_WORLD) {  /* d/dt (x + pos x y) = dx/dt + v x y + pos x dy/dt */
+            gagen_cross_add(vel, j + 3, 1.0, d);
+            gagen_cross_add(pos, d + 3, 1.0, d);
+        }
+        for (i = 0; i < 6; ++i) dJ[GAGEN_FR_NV * i + cols[c]] = d[i];
+    }
+    return 0;
+}
+
+/* M = L^T D L in place (Featherstone's LTDL, RBDA 6.5): from the last coordinate up, each
+ * touching its ancestors only; L's entries below the diagonal of M, D on it. A pivot that
+ * is not clearly positive: M is not positive definite (NaN or inf: the state was not
+ * finite). */
+static int gagen_ltdl(double *M)
+{
+    double diagonal[GAGEN_FR_NV];
+    int k, i, j;
+    for (k = 0; k < GAGEN_FR_NV; ++k) diagonal[k] = M[GAGEN_FR_NV * k + k];
+    for (k = GAGEN_FR_NV - 1; k >= 0; --k) {
+        const double d = M[GAGEN_FR_NV * k + k];
+        if (!(d > 1e-13 * diagonal[k]) || !(diagonal[k] > 0.0))
+            return isfinite(d) && isfinite(diagonal[k]) ? GAGEN_TS_NOT_POSITIVE_DEFINITE
+                                                        : GAGEN_TS_NONFINITE;
+        for (i = gagen_dof_parent[k]; i >= 0; i = gagen_dof_parent[i]) {
+            const double a = M[GAGEN_FR_NV * k + i] / d;
+            for (j = i; j >= 0; j = gagen_dof_parent[j])
+                M[GAGEN_FR_NV * i + j] -= M[GAGEN_FR_NV * k + j] * a;
+            M[GAGEN_FR_NV * k + i] = a;
+        }
+    }
+    return 0;
+}
+
+/* G = J M^-1 J^T (rows x rows) of the frames' stacked Jacobian rows (the first `dims` of
+ * each frame's LOCAL_WORLD_ALIGNED Jacobian), through M = L^T D L: with Y = J L^-1,
+ * G = Y D^-1 Y^T. Y (rows x NV) is written into work. */
+static int gagen_task_delassus(const double *q, const double *p, int count,
+                               const int *frames, int dims, double *work, double *G)
+{
+    double M[GAGEN_FR_NV * GAGEN_FR_NV], X[15 * GAGEN_FR_NB], J[6 * GAGEN_FR_NV];
+    double Dinv[GAGEN_FR_NV];
+    char marked[GAGEN_FR_NB] = {0};
+    const int rows = dims * count;
+    int k, i, j, a, b, rc;
+    if (count < 1 || (dims != 3 && dims != 6)) return GAGEN_ERR_BAD_ARG;
+    for (k = 0; k < count; ++k) {
+        if (frames[k] < 0 || frames[k] >= GAGEN_FR_NF) return GAGEN_ERR_BAD_ARG;
+        gagen_mark_path(frames[k], marked);
+    }
+    rrr_mass_matrix(q, p, M);
+    rc = gagen_ltdl(M);
+    if (rc != 0) return rc;
+    for (k = 0; k < GAGEN_FR_NV; ++k) Dinv[k] = 1.0 / M[GAGEN_FR_NV * k + k];
+    gagen_place_marked(q, p, marked, X);
+    for (k = 0; k < count; ++k) {
+        gagen_frame_jacobian_at(p, X, frames[k], GAGEN_LOCAL_WORLD_ALIGNED, J);
+        for (i = 0; i < dims * GAGEN_FR_NV; ++i) work[dims * GAGEN_FR_NV * k + i] = J[i];
+    }
+    /* y L = j for each row, from the last coordinate up: y_i -= L_ki y_k, i an ancestor of k */
+    for (a = 0; a < rows; ++a) {
+        double *y = work + GAGEN_FR_NV * a;
+        for (k = GAGEN_FR_NV - 1; k >= 0; --k)
+            if (y[k] != 0.0)
+                for (i = gagen_dof_parent[k]; i >= 0; i = gagen_dof_parent[i])
+                    y[i] -= M[GAGEN_FR_NV * k + i] * y[k];
+    }
+    for (a = 0; a < rows; ++a)
+        for (b = 0; b <= a; ++b) {
+            const double *ya = work + GAGEN_FR_NV * a, *yb = work + GAGEN_FR_NV * b;
+            double s = 0.0;
+            for (j = 0; j < GAGEN_FR_NV; ++j) s += ya[j] * yb[j] * Dinv[j];
+            G[rows * a + b] = G[rows * b + a] = s;
+        }
+    return 0;
+}
+
+int rrr_delassus(const double *q, const double *p, int count, const int *frames,
+                         int dims, double *work, double *G)
+{
+    return gagen_task_delassus(q, p, count, frames, dims, work, G);
+}
+
+int rrr_operational_space_inertia(const double *q, const double *p, int count,
+                                          const int *frames, int dims, double *work,
+                                          double *Lambda)
+{
+    const int rows = dims * count;
+    double *L = work;  /* after G is made, work holds its factors, then Lambda's columns */
+    int i, j, k, rc;
+    if (count < 1 || (dims != 3 && dims != 6)) return GAGEN_ERR_BAD_ARG;
+    if (rows > GAGEN_FR_NV) return GAGEN_TS_SINGULAR_TASK;  /* more rows than coordinates */
+    rc = gagen_task_delassus(q, p, count, frames, dims, work, Lambda);
+    if (rc != 0) return rc;
+    /* G = L D L^T (rows x rows, dense), in work; a pivot that is not clearly positive
+       against its diagonal entry: the rows are dependent */
+    for (i = 0; i < rows * rows; ++i) L[i] = Lambda[i];
+    for (j = 0; j < rows; ++j) {
+        double d = L[rows * j + j];
+        for (k = 0; k < j; ++k) d -= L[rows * j + k] * L[rows * j + k] * L[rows * k + k];
+        if (!(d > GAGEN_TS_PIVOT * Lambda[rows * j + j]))
+            return isfinite(d) ? GAGEN_TS_SINGULAR_TASK : GAGEN_TS_NONFINITE;
+        L[rows * j + j] = d;
+        for (i = j + 1; i < rows; ++i) {
+            double s = L[rows * i + j];
+            for (k = 0; k < j; ++k) s -= L[rows * i + k] * L[rows * j + k] * L[rows * k + k];
+            L[rows * i + j] = s / d;
+        }
+    }
+    /* Lambda = G^-1, column by column: L z = e_c, z /= D, L^T x = z */
+    for (j = 0; j < rows; ++j) {
+        double x[GAGEN_FR_NV];
+        for (i = 0; i < rows; ++i) {
+            double s = i == j ? 1.0 : 0.0;
+            for (k = 0; k < i; ++k) s -= L[rows * i + k] * x[k];
+            x[i] = s;
+        }
+        for (i = 0; i < rows; ++i) x[i] /= L[rows * i + i];
+        for (i = rows - 1; i >= 0; --i) {
+            double s = x[i];
+            for (k = i + 1; k < rows; ++k) s -= L[rows * k + i] * x[k];
+            x[i] = s;
+        }
+        for (i = 0; i < rows; ++i) Lambda[rows * i + j] = x[i];
+    }
+    for (i = 0; i < rows; ++i)  /* symmetric to the last bit */
+        for (j = 0; j < i; ++j)
+            Lambda[rows * i + j] = Lambda[rows * j + i] =
+                0.5 * (Lambda[rows * i + j] + Lambda[rows * j + i]);
+    return 0;
+}
+
 int rrr_frame_placement(const double *q, const double *p, int frame, double *R,
                                 double *pos)
 {
@@ -468,30 +883,36 @@ int rrr_frame_placement(const double *q, const double *p, int frame, double *R,
     return 0;
 }
 
-int rrr_frame_jacobian(const double *q, const double *p, int frame, double *J)
+int rrr_frame_jacobian(const double *q, const double *p, int frame, int reference,
+                               double *J)
 {
     double X[15 * GAGEN_FR_NB], R[9], pos[3], col[6 * GAGEN_FR_NV];
     int cols[GAGEN_FR_NV], m, i, c;
-    if (frame < 0 || frame >= GAGEN_FR_NF) return GAGEN_ERR_BAD_ARG;
+    if (frame < 0 || frame >= GAGEN_FR_NF || !GAGEN_TS_REFERENCE_OK(reference))
+        return GAGEN_ERR_BAD_ARG;
     gagen_place_frame(q, p, frame, X, R, pos);
     for (i = 0; i < 6 * GAGEN_FR_NV; ++i) J[i] = 0.0;
     m = gagen_frame_columns(X, frame, pos, col, cols);
-    for (c = 0; c < m; ++c)
+    for (c = 0; c < m; ++c) {
+        gagen_motion_to(reference, R, pos, col + 6 * c);
         for (i = 0; i < 6; ++i) J[GAGEN_FR_NV * i + cols[c]] = col[6 * c + i];
+    }
     return 0;
 }
 
 int rrr_frame_velocity(const double *q, const double *qd, const double *p, int frame,
-                               double *v)
+                               int reference, double *v)
 {
     double X[15 * GAGEN_FR_NB], R[9], pos[3], col[6 * GAGEN_FR_NV];
     int cols[GAGEN_FR_NV], m, i, c;
-    if (frame < 0 || frame >= GAGEN_FR_NF) return GAGEN_ERR_BAD_ARG;
+    if (frame < 0 || frame >= GAGEN_FR_NF || !GAGEN_TS_REFERENCE_OK(reference))
+        return GAGEN_ERR_BAD_ARG;
     gagen_place_frame(q, p, frame, X, R, pos);
     m = gagen_frame_columns(X, frame, pos, col, cols);
     for (i = 0; i < 6; ++i) v[i] = 0.0;
     for (c = 0; c < m; ++c)
         for (i = 0; i < 6; ++i) v[i] += col[6 * c + i] * qd[cols[c]];
+    gagen_motion_to(reference, R, pos, v);
     return 0;
 }
 

@@ -54,6 +54,18 @@ static const gagen_model_api api = {
     .regressor_parameters = rrr_regressor_parameters,
     .simulate = rrr_simulate,
     .control_torques = rrr_control_torques,
+    .center_of_mass = rrr_center_of_mass,
+    .com_velocity = rrr_com_velocity,
+    .com_jacobian = rrr_com_jacobian,
+    .centroidal_map = rrr_centroidal_map,
+    .centroidal_momentum = rrr_centroidal_momentum,
+    .centroidal_map_time_variation = rrr_centroidal_map_time_variation,
+    .centroidal_bias = rrr_centroidal_bias,
+    .frame_jacobians = rrr_frame_jacobians,
+    .frame_acceleration = rrr_frame_acceleration,
+    .frame_jacobian_time_variation = rrr_frame_jacobian_time_variation,
+    .delassus = rrr_delassus,
+    .operational_space_inertia = rrr_operational_space_inertia,
 };
 
 static struct PyModuleDef module_definition = {
@@ -73,7 +85,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "c815c312748dcbccf38561d6fe516835ba656b79f6d5b9d7d061032126d605af") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "8aed104a3cd7bcbc86f9ec1e706c48b6e90f361dcb53bc8268b8247099b8383a") < 0) {
         Py_DECREF(module);
         return NULL;
     }

@@ -47,6 +47,21 @@
 #define RRR_ERR_NOT_POSITIVE_DEFINITE 1
 /* returned instead when the factorisation met NaN or inf: the state was not finite */
 #define RRR_ERR_NONFINITE 2
+/* returned by rrr_operational_space_inertia when the frames' rows are dependent */
+#define RRR_ERR_SINGULAR_TASK 3
+
+/* The references of frame quantities (Pinocchio's ReferenceFrame and its numbers): WORLD,
+ * at the world's origin in world axes; LOCAL, at the frame's origin in its own axes;
+ * LOCAL_WORLD_ALIGNED, at the frame's origin in world axes. Linear part first. */
+#ifndef GAGEN_LOCAL_WORLD_ALIGNED
+#define GAGEN_WORLD 0
+#define GAGEN_LOCAL 1
+#define GAGEN_LOCAL_WORLD_ALIGNED 2
+/* a frame's acceleration: classical (its origin's acceleration, then the angular one) or
+ * spatial (the rate of its spatial velocity's components) */
+#define GAGEN_CLASSICAL 0
+#define GAGEN_SPATIAL 1
+#endif
 
 #ifdef __cplusplus
 extern "C" {
@@ -94,9 +109,10 @@ void rrr_regressor_parameters(const double *p, double *pi);
 /* TV[0] = kinetic energy, TV[1] = potential energy (zero at the world origin) */
 void rrr_energy(const double *q, const double *qd, const double *p, double *TV);
 
-/* Frames (Pinocchio's LOCAL_WORLD_ALIGNED: linear velocity of the frame's origin, then the
- * angular velocity, in world axes; wrenches are (force, torque) in world axes at the frame's
- * origin). Those taking a frame number return 0, or GAGEN_ERR_BAD_ARG for a bad number. */
+/* Frames (velocities and Jacobians in a `reference`, GAGEN_LOCAL_WORLD_ALIGNED: the linear
+ * velocity of the frame's origin, then the angular velocity, in world axes; wrenches are
+ * (force, torque) in world axes at the frame's origin). Those taking a frame number return
+ * 0, or GAGEN_ERR_BAD_ARG for a bad number, reference or kind. */
 #define RRR_NFRAMES 6
 /* X: per body (15 each) R row-major, origin, joint axis, all in the world */
 void rrr_placements(const double *q, const double *p, double *X);
@@ -105,9 +121,38 @@ void rrr_frame_offsets(const double *p, double *F);
 int rrr_frame_placement(const double *q, const double *p, int frame, double *R,
                                 double *pos);
 /* J: 6 x 3, row-major */
-int rrr_frame_jacobian(const double *q, const double *p, int frame, double *J);
+int rrr_frame_jacobian(const double *q, const double *p, int frame, int reference,
+                               double *J);
 int rrr_frame_velocity(const double *q, const double *qd, const double *p, int frame,
-                               double *v);
+                               int reference, double *v);
+
+/* Task space. The Jacobians of count frames at once (count x 6 x 3), their common
+ * ancestors placed once. */
+int rrr_frame_jacobians(const double *q, const double *p, int count, const int *frames,
+                                int reference, double *J);
+/* a (6): the frame's acceleration at qdd (NULL: 0), GAGEN_CLASSICAL or GAGEN_SPATIAL */
+int rrr_frame_acceleration(const double *q, const double *qd, const double *qdd,
+                                   const double *p, int frame, int reference, int kind,
+                                   double *a);
+/* a (6) at qdd = 0: dJ/dt qd in that convention */
+int rrr_frame_bias_acceleration(const double *q, const double *qd, const double *p,
+                                        int frame, int reference, int kind, double *a);
+/* dJ (6 x 3): the time variation of the frame's Jacobian in `reference` (Pinocchio's
+ * getFrameJacobianTimeVariation); dJ qd is the spatial acceleration at qdd = 0 (LOCAL,
+ * WORLD), the classical one (LOCAL_WORLD_ALIGNED) */
+int rrr_frame_jacobian_time_variation(const double *q, const double *qd,
+                                              const double *p, int frame, int reference,
+                                              double *dJ);
+/* For the rows m = dims * count (dims 6, or 3: linear rows only) of count frames' stacked
+ * LOCAL_WORLD_ALIGNED Jacobians J: G = J M^-1 J^T (m x m) and Lambda = G^-1 (m x m), from
+ * M = L^T D L (M is never inverted). work holds m x 3 doubles. They return 0,
+ * RRR_ERR_NOT_POSITIVE_DEFINITE or _NONFINITE for M, GAGEN_ERR_BAD_ARG, and
+ * Lambda RRR_ERR_SINGULAR_TASK when the rows are dependent. */
+int rrr_delassus(const double *q, const double *p, int count, const int *frames,
+                         int dims, double *work, double *G);
+int rrr_operational_space_inertia(const double *q, const double *p, int count,
+                                          const int *frames, int dims, double *work,
+                                          double *Lambda);
 /* tau += sum over k < count of J(frames[k])^T wrenches[6 k .. 6 k + 5] */
 int rrr_frame_forces(const double *q, const double *p, int count, const int *frames,
                              const double *wrenches, double *tau);
@@ -118,6 +163,29 @@ int rrr_forward_dynamics_ext(const double *q, const double *qd, const double *ta
 int rrr_inverse_dynamics_ext(const double *q, const double *qd, const double *qdd,
                                      const double *p, int count, const int *frames,
                                      const double *wrenches, double *tau);
+
+/* Centre of mass and centroidal dynamics (Pinocchio's centerOfMass, ccrba, dccrba): 6-vectors
+ * and the rows of 6 x 3 matrices (row-major) are linear then angular, in world axes, about
+ * the centre of mass; the angular part of h_g is the angular momentum about it. Bodies welded
+ * to the world are not part of the robot's mass. */
+/* com: the centre of mass in the world (3) */
+void rrr_center_of_mass(const double *q, const double *p, double *com);
+/* vcom: its velocity (3) */
+void rrr_com_velocity(const double *q, const double *qd, const double *p,
+                              double *vcom);
+/* J: 3 x 3, vcom = J qd */
+void rrr_com_jacobian(const double *q, const double *p, double *J);
+/* Ag: the centroidal momentum matrix, 6 x 3, h_g = Ag qd */
+void rrr_centroidal_map(const double *q, const double *p, double *Ag);
+/* hg: the centroidal momentum (6): linear momentum, angular momentum about the centre */
+void rrr_centroidal_momentum(const double *q, const double *qd, const double *p,
+                                     double *hg);
+/* dAg: d/dt Ag, 6 x 3 */
+void rrr_centroidal_map_time_variation(const double *q, const double *qd,
+                                               const double *p, double *dAg);
+/* b = dAg qd (6): d/dt h_g = Ag qdd + b */
+void rrr_centroidal_bias(const double *q, const double *qd, const double *p,
+                                 double *b);
 
 #ifdef __cplusplus
 }

@@ -15,6 +15,7 @@ from .errors import (
     ModelError,
     NonFiniteStateError,
     SingularMassMatrixError,
+    SingularTaskError,
 )
 from .ident import identify
 from .loading import load
@@ -45,6 +46,7 @@ __all__ = [
     "NonFiniteStateError",
     "SimulationResult",
     "SingularMassMatrixError",
+    "SingularTaskError",
     "__version__",
     "derive",
     "identify",

@@ -77,6 +77,25 @@ class ModelInfo:
             indices.setdefault(name, k)
         return indices
 
+    @cached_property
+    def moving_tree(self) -> tuple[tuple[int, int, int, int], ...]:
+        """Per moving body (in `bodies`' order, parents first: the order of the regressor's
+        parameters and of `moving_bodies`): (its index in `bodies`, its nearest moving
+        ancestor's index in this list or -1, its joint's kind, its first velocity
+        coordinate). A fixed body belongs to its moving ancestor; one welded to the world
+        to nothing that moves (the centre of mass leaves it out, as Pinocchio does)."""
+        fixed = JOINT_KINDS["fixed"]
+        slot: dict[int, int] = {}
+        tree = []
+        for body, (parent, kind, column) in enumerate(self.bodies):
+            if kind == fixed:
+                continue
+            while parent >= 0 and parent not in slot:  # a fixed ancestor: look past it
+                parent = self.bodies[parent][0]
+            slot[body] = len(tree)
+            tree.append((body, slot[parent] if parent >= 0 else -1, kind, column))
+        return tuple(tree)
+
     @property
     def coordinates(self) -> list[str]:
         """The velocity coordinates' names (a floating joint's six: `<joint>_vx` ...)."""
@@ -105,6 +124,18 @@ class ModelInfo:
             iq += len(joint_names(joint, CONFIGURATION))
             iv += len(joint_names(joint, VELOCITY))
         return out
+
+    def quaternions(self) -> tuple[tuple[int, str], ...]:
+        """(first entry in q, description) of each floating joint's quaternion, for the
+        input checks (gagen.runtime.inputs.check_quaternions)."""
+        out = []
+        for (iq, _), joint in zip(self.floating_joints(),
+                                  [j for j in self.joints if j.type == "floating"]):
+            names = ", ".join(joint_names(joint, CONFIGURATION)[3:])
+            label = (f"q[{iq + 3}:{iq + 7}] ({names}), the quaternion of floating joint "
+                     f"{joint.name!r},")
+            out.append((iq + 3, label))
+        return tuple(out)
 
     @property
     def parameter_defaults(self) -> dict[str, float]:

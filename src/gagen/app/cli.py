@@ -71,6 +71,9 @@ def _count(low: int, high: int, what: str) -> Callable[[str], int]:
 
 _sample_count = _count(2, 10_000_000, "samples")
 _run_count = _count(1, 100_000_000, "runs")
+_thread_count = _count(1, 4096, "threads")
+_seed = _count(0, 2**64 - 1, "(a seed)")
+_degree = _count(2, 20, "(a polynomial degree)")
 
 
 def _numbers(text: str) -> list[float]:
@@ -114,6 +117,13 @@ def _add_cache_dir(p: argparse.ArgumentParser) -> None:
                    "user's cache folder, e.g. ~/.cache/gagen)")
 
 
+def _add_package_path(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--package-path", action="append", default=None, metavar="DIR",
+                   help="where a URDF's package://NAME/... meshes are found (DIR/NAME/...); "
+                   "repeat for several; $ROS_PACKAGE_PATH is searched after them. Meshes are "
+                   "read only inside these folders and the description's folder")
+
+
 def _build_arguments(p: argparse.ArgumentParser) -> None:
     _add_model(p)
     p.add_argument("--out", metavar="DIR",
@@ -134,6 +144,18 @@ def _build_arguments(p: argparse.ArgumentParser) -> None:
 
 def _info_arguments(p: argparse.ArgumentParser) -> None:
     _add_model(p)
+
+
+def _export_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("target", choices=("casadi",),
+                   help="casadi: CasADi external functions (casadi.external, acados)")
+    _add_model(p, required=True)
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="folder for the C sources and the library (created if needed)")
+    _add_cache_dir(p)
+    p.add_argument("--portable", action="store_true",
+                   help="kernels for any CPU of this architecture (default: this CPU's "
+                   "fused multiply-add where it has it)")
 
 
 def _run_arguments(p: argparse.ArgumentParser, what: str) -> None:
@@ -183,6 +205,11 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                    help="leave out the gravity torque g(q) of the PD law")
     p.add_argument("--gif", action="store_true",
                    help="also write arm.gif, an animation of the arm (a few seconds)")
+    p.add_argument("--html", action="store_true",
+                   help="also write simulate.html: the run played back in 3-D with the "
+                   "robot's meshes, one self-contained file that plays offline in any "
+                   "browser (needs pip install gagen[viewer])")
+    _add_package_path(p)
 
 
 def _sweep_arguments(p: argparse.ArgumentParser) -> None:
@@ -193,8 +220,11 @@ def _sweep_arguments(p: argparse.ArgumentParser) -> None:
                    help="draw NAME for every run, uniformly in [LO, HI] or within +-P %% of "
                    "its default; NAME is a parameter (patterns allowed: 'm[123]=20%%'), or "
                    "q0, qd0, kp, kd, target (degrees for angles), or one coordinate of them "
-                   "(q0.q2=-10:10); repeat for several")
-    p.add_argument("--seed", type=int, default=0, help="seed of the draws (default: 0)")
+                   "(q0.q2=-10:10); repeat for several. A floating base: q0, qd0, ... vary "
+                   "the joints only; q0.base_x (m), qd0.base_wx (deg/s) name the base's "
+                   "entries; its quaternion cannot be varied (see above)")
+    p.add_argument("--seed", type=_seed, default=0,
+                   help="seed of the draws, a whole number >= 0 (default: 0)")
     p.add_argument("--duration", type=_positive, default=5.0, metavar="S",
                    help="simulated time in seconds (default: %(default)s)")
     p.add_argument("--points", type=_sample_count, default=501, metavar="N",
@@ -202,7 +232,7 @@ def _sweep_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", choices=COMPILED_METHODS, default="dopri5",
                    help="gagen's C integrator (default: %(default)s)")
     _add_tolerances(p)
-    p.add_argument("--threads", type=int, default=None, metavar="K",
+    p.add_argument("--threads", type=_thread_count, default=None, metavar="K",
                    help="threads for the runs (default: every core)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on a Dask cluster, e.g. tcp://host:8786 (needs gagen[dask])")
@@ -210,6 +240,16 @@ def _sweep_arguments(p: argparse.ArgumentParser) -> None:
                    help="results: FILE.zarr (streamed in blocks; needs gagen[zarr]) or "
                    "FILE.npz (default: out/<model>/sweep.zarr, or .npz without Zarr)")
     p.add_argument("--no-plot", action="store_true", help="do not draw the fan figure")
+    p.add_argument("--html", action="store_true",
+                   help="also write FILE's stem + .html: chosen runs played back in 3-D, one "
+                   "self-contained file (needs pip install gagen[viewer])")
+    p.add_argument("--html-runs", nargs="+", type=_count(0, 100_000_000, "run numbers"),
+                   metavar="I", help="the runs the HTML file shows (default: the nominal "
+                   "run, then the first 9 runs)")
+    p.add_argument("--html-mode", choices=("overlay", "sequence"), default="overlay",
+                   help="overlay: the runs drawn together, all but the first ghosted; "
+                   "sequence: one after the other (default: %(default)s)")
+    _add_package_path(p)
     _add_cache_dir(p)
 
 
@@ -227,12 +267,31 @@ def _identify_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--window", type=_positive, default=None, metavar="S",
                    help="Savitzky-Golay window in seconds for missing rates and "
                    "accelerations (default: 0.05)")
-    p.add_argument("--polyorder", type=int, default=4, metavar="K",
-                   help="Savitzky-Golay polynomial degree, at least 2 (default: %(default)s)")
+    p.add_argument("--polyorder", type=_degree, default=4, metavar="K",
+                   help="Savitzky-Golay polynomial degree, 2 to 20 (default: %(default)s)")
     p.add_argument("--min-speed", type=_nonnegative, default=0.0, metavar="V",
                    help="leave out each joint's torque where it moves slower than V (rad/s, "
                    "m/s): Coulomb friction at rest holds any torque within its bound "
                    "(default: %(default)s)")
+
+
+def _view_arguments(p: argparse.ArgumentParser) -> None:
+    _add_model(p, required=True)
+    p.add_argument("--run", metavar="RUN.csv",
+                   help="play this run back (a CSV as simulate writes it: the columns t and "
+                   "the model's configuration, read by name)")
+    _add_package_path(p)
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to listen on (default: %(default)s, this machine only; "
+                   "0.0.0.0 shares the viewer on the network)")
+    p.add_argument("--port", type=_count(0, 65535, "port number"), default=8080,
+                   help="first port tried; the next free one is taken (default: %(default)s; "
+                   "0: any free port)")
+    p.add_argument("--no-browser", action="store_true",
+                   help="do not open a browser, only print the address")
+    p.add_argument("--backend", choices=("compiled", "lambdify"), default="compiled",
+                   help="placements from compiled C or sympy.lambdify (default: %(default)s)")
+    _add_cache_dir(p)
 
 
 def _paper_arguments(p: argparse.ArgumentParser) -> None:
@@ -336,9 +395,24 @@ _METHODS = (
     ("integrate(q, v, dt)", "q moved by v dt (Pinocchio's integrate): ({nq},)"),
     ("difference(q0, q1)", "v with integrate(q0, v) = q1: ({n},)"),
     ("frame_placement(q, frame)", "(R, p): (3, 3), (3,) in the world"),
-    ("frame_velocity(q, qd, frame)", "linear, angular (world axes): (6,)"),
-    ("frame_jacobian(q, frame)", "LOCAL_WORLD_ALIGNED: (6, {n})"),
+    ("frame_velocity(q, qd, frame, reference)", "linear, angular: (6,)"),
+    ("frame_jacobian(q, frame, reference)",
+     "'local_world_aligned' (default), 'local', 'world': (6, {n}); a list of k: (k, 6, {n})"),
+    ("frame_acceleration(q, qd, qdd, frame, ...)",
+     "reference=, kind='classical' (default) or 'spatial': (6,)"),
+    ("frame_bias_acceleration(q, qd, frame, ...)", "the same at qdd = 0: dJ/dt qd, (6,)"),
+    ("frame_jacobian_time_variation(q, qd, frame)",
+     "dJ/dt, as Pinocchio's getFrameJacobianTimeVariation: (6, {n})"),
+    ("delassus(q, frames, dims)", "J M^-1 J^T of k frames' rows (6 or 3 each): (k dims, k dims)"),
+    ("operational_space_inertia(q, frames, dims)", "its inverse, from M's factors: (k dims, k dims)"),
     ("external_forces(q, fext)", "sum of J^T w of wrenches {{frame: w}}: ({n},)"),
+    ("center_of_mass(q)", "the centre of mass, in the world: (3,)"),
+    ("com_velocity(q, qd)", "the centre of mass's velocity: (3,)"),
+    ("com_jacobian(q)", "J_com, com_velocity = J_com qd: (3, {n})"),
+    ("centroidal_map(q)", "A_g: at the CoM, world axes, linear first: (6, {n})"),
+    ("centroidal_momentum(q, qd)", "h_g = A_g qd (angular: about the CoM): (6,)"),
+    ("centroidal_map_time_variation(q, qd)", "d/dt A_g: (6, {n})"),
+    ("centroidal_bias(q, qd)", "d/dt A_g qd: d/dt h_g = A_g qdd + this: (6,)"),
     ("inverse_dynamics_derivatives(q, qd, qdd) *", "(dtau_dq, dtau_dqd): ({n}, {n}) each"),
     ("forward_dynamics_derivatives(q, qd, tau) *",
      "(dqdd_dq, dqdd_dqd, dqdd_dtau = M^-1): ({n}, {n}) each"),
@@ -364,6 +438,27 @@ def _print_methods(n: int, nq: int, P: int) -> None:
           "front")
 
 
+def export_command(args: argparse.Namespace) -> int:
+    """A model's functions for another tool: the CasADi library (gagen.casadi.build.export)."""
+    from ..casadi.build import export, model_ident
+    from ..casadi.generate import function_name, prefix_of
+    from ..casadi.table import ENTRIES
+    from ..loading import load
+
+    dyn = load(args.model, strict=args.strict, floating_base=args.floating_base,
+               cache_dir=args.cache_dir, derivatives=True)
+    path = export(dyn, Path(args.out), portable=args.portable)
+    prefix = prefix_of(model_ident(dyn))
+    print(f"gagen: wrote {path} and its sources ({prefix}.c, {prefix}.h: the functions, "
+          "their inputs and outputs, the frames' numbers) into " + str(Path(args.out)))
+    names = ", ".join(function_name(prefix, entry.name) for entry in ENTRIES)
+    print(f"gagen: functions {names}; each F with jac_F (its Jacobian) and F_p (the "
+          "parameters p as a last input)")
+    print(f"gagen: load one with casadi.external(\"{function_name(prefix, 'forward_dynamics')}\", "
+          f"\"{path}\")")
+    return 0
+
+
 def simulate_command(args: argparse.Namespace) -> int:
     """Direct dynamics under a PD law (gagen.app.runs.run_simulate)."""
     from .runs import print_simulate_report, run_simulate
@@ -373,7 +468,8 @@ def simulate_command(args: argparse.Namespace) -> int:
                        rtol=args.rtol, atol=args.atol, step=args.step,
                        target=_flat(args.target), kp=_flat(args.kp), kd=_flat(args.kd),
                        gravity_compensation=not args.no_gravity_compensation, gif=args.gif,
-                       strict=args.strict, floating_base=args.floating_base)
+                       strict=args.strict, floating_base=args.floating_base, html=args.html,
+                       package_dirs=args.package_path)
     print_simulate_report(run)
     return 0
 
@@ -397,7 +493,9 @@ def sweep_command(args: argparse.Namespace) -> int:
                     duration=args.duration, points=args.points, method=args.method,
                     rtol=args.rtol, atol=args.atol, step=args.step, threads=args.threads,
                     scheduler=args.scheduler, out=args.out, cache_dir=args.cache_dir,
-                    plot=not args.no_plot)
+                    plot=not args.no_plot, html=args.html, html_runs=args.html_runs,
+                    html_mode=args.html_mode, package_dirs=args.package_path,
+                    strict=args.strict, floating_base=args.floating_base)
     print_sweep_report(run)
     return 0
 
@@ -417,6 +515,25 @@ def identify_command(args: argparse.Namespace) -> int:
     print(result.summary())
     for path in files:
         print(f"gagen: wrote {path}")
+    return 0
+
+
+def view_command(args: argparse.Namespace) -> int:
+    """The live 3-D viewer in the browser, until Ctrl-C (gagen.viewer.live)."""
+    from ..viewer import read_run, require, start_viewer
+    from .runs import load_dynamics
+
+    require()
+    _, dyn = load_dynamics(args.model, args.backend, args.cache_dir, args.strict,
+                           args.floating_base)
+    run = read_run(args.run, dyn) if args.run else None
+    viewer = start_viewer(dyn, run=run, package_dirs=args.package_path, host=args.host,
+                          port=args.port, open_browser=not args.no_browser)
+    print(f"gagen: viewer at {viewer.url} (Ctrl-C to stop)", flush=True)
+    try:
+        viewer.serve_forever()
+    except KeyboardInterrupt:
+        print("gagen: viewer stopped", file=sys.stderr)
     return 0
 
 
@@ -459,8 +576,8 @@ SIMULATE_DESCRIPTION = (
     "          into the joint limits); kp = 16 I_i, kd = 8 I_i, I_i the largest M_ii at\n"
     "          q = 0, half-way and at the target\n\n"
     "Writes simulate.csv (t, q, qd, tau; SI units, radians), fig2_positions.png, "
-    "fig3_arm.png\nand, with --gif, arm.gif into --out. Put MODEL before the lists "
-    "(--target, --kp, --kd).")
+    "fig3_arm.png\nand, with --gif, arm.gif, with --html, simulate.html (the run in 3-D, "
+    "one file) into\n--out. Put MODEL before the lists (--target, --kp, --kd).")
 
 INVERSE_DESCRIPTION = (
     "Inverse dynamics: the torques that move the arm along eq. 11,\n"
@@ -476,11 +593,30 @@ SWEEP_DESCRIPTION = (
     "(gagen.simulate_batch) or on a Dask cluster (--scheduler). Example, the paper's Fig. 2\n"
     "under +-20 % mass uncertainty:\n\n"
     "  python -m gagen sweep rrr --runs 1000 --vary 'm[123]=20%' --out out/rrr/sweep.zarr\n\n"
-    "Writes FILE (.zarr: t, q, qd, tau (N, m, n), status, nfev, steps, rejected, q0, qd0,\n"
-    "p, kp, kd, target; streamed in blocks; read it with zarr.open_group or xarray.open_zarr.\n"
-    ".npz: the same arrays, read with np.load), FILE's stem + _fan.png (every run's q(t),\n"
-    "5-95 % band, median, nominal, deviation from the nominal) and + _final.csv (statistics\n"
-    "of the final state, also printed).")
+    "Writes FILE (.zarr: t, q (N, m, nq), qd, tau (N, m, nv), status, nfev, steps, rejected,\n"
+    "q0, qd0, p, kp, kd, target; streamed in blocks; read it with zarr.open_group or\n"
+    "xarray.open_zarr. .npz: the same arrays, read with np.load; the attributes name q's\n"
+    "entries (configuration) and qd's (coordinates)), FILE's stem + _fan.png (every run's\n"
+    "q(t), 5-95 % band, median, nominal, deviation from the nominal), + _final.csv\n"
+    "(statistics of the final state, also printed) and, with --html, + .html (chosen runs\n"
+    "in 3-D).\n\n"
+    "A floating base (--floating-base on a URDF, a model file's or MJCF's floating joint)\n"
+    "starts at the origin, unrotated, at rest. There q0, qd0, kp, kd, target without a\n"
+    "name vary the joints only. Name a base entry to vary it (names after its joint, here\n"
+    "base; a URDF's is root_joint): q0.base_x=-0.1:0.1 (m; q0 names dyn.configuration),\n"
+    "qd0.base_vz=0:1 (m/s), qd0.base_wx=-10:10 (deg/s; qd0 names dyn.coordinates). Its\n"
+    "quaternion (base_qx ... base_qw) cannot be drawn as angles and is refused, and so are\n"
+    "its kp, kd, target (it has no actuator). The statistics cover every entry of q (the\n"
+    "quaternion's unitless); the fan figure shows the joints only.")
+
+VIEW_DESCRIPTION = (
+    "A live 3-D view of MODEL in the browser (viser; needs pip install gagen[viewer]): the\n"
+    "robot in its neutral configuration with its meshes (a URDF's visuals, found through\n"
+    "--package-path and $ROS_PACKAGE_PATH; MJCF geoms; inertia boxes for models without),\n"
+    "a slider per joint, its frames on demand, and with --run a simulation's playback\n"
+    "(time slider, play/pause, speed). Runs until Ctrl-C. Example:\n\n"
+    "  python -m gagen simulate robot.urdf --out out/robot\n"
+    "  python -m gagen view robot.urdf --run out/robot/simulate.csv")
 
 IDENTIFY_DESCRIPTION = (
     "Identification: least squares on the base regressor, tau = Y_b(q, qd, qdd) pi_b.\n\n"
@@ -492,6 +628,18 @@ IDENTIFY_DESCRIPTION = (
     "expression) and identified.json (also the grouping matrix and covariance) into --out\n"
     "and prints the estimates.")
 
+EXPORT_DESCRIPTION = (
+    "Export a model's dynamics and their analytic derivatives for another tool.\n\n"
+    "  casadi: C sources that follow CasADi's C API for external functions, and the shared\n"
+    "          library compiled from them with the model's C kernels (no Python at run\n"
+    "          time): forward_dynamics, inverse_dynamics, mass_matrix, gravity,\n"
+    "          coriolis_matrix, frame_placement, frame_jacobian, frame_velocity, each F\n"
+    "          with its Jacobian jac_F and F_p (the parameters as a last input). Load them\n"
+    "          with casadi.external(NAME, LIBRARY), or link the library from C (CasADi's\n"
+    "          generated code, acados' generic external functions). <model>_casadi.h lists\n"
+    "          them, their inputs and outputs, and the frames' numbers.\n\n"
+    "Example: python -m gagen export casadi robot.urdf --out casadi_robot")
+
 COMMANDS: dict[str, Command] = {
     "build": Command(
         build_command, "derive, generate C and compile a model", _build_arguments,
@@ -499,6 +647,9 @@ COMMANDS: dict[str, Command] = {
         "extension module. Shows each stage with its time and prints the operation counts before and "
         "after CSE."),
     "info": Command(info_command, "show a model's coordinates, parameters and API", _info_arguments),
+    "export": Command(export_command,
+                      "write a model's functions for another tool: CasADi, acados",
+                      _export_arguments, EXPORT_DESCRIPTION, preformatted=True),
     "simulate": Command(simulate_command,
                         "direct dynamics under feedback: the paper's Fig. 2 and 3",
                         _simulate_arguments, SIMULATE_DESCRIPTION, preformatted=True),
@@ -507,6 +658,8 @@ COMMANDS: dict[str, Command] = {
     "sweep": Command(sweep_command,
                      "many simulations at once under varied parameters: Monte-Carlo, sweeps",
                      _sweep_arguments, SWEEP_DESCRIPTION, preformatted=True),
+    "view": Command(view_command, "a live 3-D view of a model (and a run) in the browser",
+                    _view_arguments, VIEW_DESCRIPTION, preformatted=True),
     "identify": Command(identify_command,
                         "identify the base parameters from measured motion and torques",
                         _identify_arguments, IDENTIFY_DESCRIPTION, preformatted=True),
@@ -553,18 +706,46 @@ def parser() -> argparse.ArgumentParser:
 # ---------------------------------------------------------------------------- main
 
 
-# What a user can cause, and the exit code each gets: bad input (2) or a run that failed (1).
-# Anything else is a bug in gagen and keeps its traceback.
+# What a user can cause, and the exit code each gets: bad input (2) or a run that failed (1),
+# out of memory or a missing optional package included. Anything else is a bug in gagen and
+# keeps its traceback.
 def _exit_code(exc: BaseException) -> int | None:
     from ..building.builder import BuildError
     from ..runtime.dynamics import SingularMassMatrixError
 
     if isinstance(exc, (BuildError, SingularMassMatrixError, NonFiniteStateError, OSError,
-                        RuntimeError)):
+                        RuntimeError, MemoryError, ImportError)):
         return 1
-    if isinstance(exc, (ModelError, ValueError, TypeError, KeyError)):
+    if isinstance(exc, (ModelError, ValueError, TypeError, KeyError, ArithmeticError)):
         return 2
     return None
+
+
+# The options that decide how much memory a command takes (named when it runs out).
+_SIZING_OPTIONS = {"sweep": "--runs and --points", "simulate": "--points and --duration",
+                   "inverse": "--points", "identify": "the rows of DATA",
+                   "build": "the model's size", "bench": "--full and --models"}
+# Optional packages and the extra of gagen that brings each (pyproject.toml).
+_EXTRAS = {"mujoco": "mjcf", "zarr": "zarr", "dask": "dask", "distributed": "dask",
+           "pinocchio": "bench", "pydy": "bench", "cmeel": "bench"}
+
+
+def _message(exc: BaseException, command: str) -> str:
+    """The one line the CLI prints for a user's error (see _exit_code)."""
+    if isinstance(exc, MemoryError):
+        return (f"out of memory running '{command}'"
+                + (f": {_SIZING_OPTIONS[command]} decide how much it takes"
+                   if command in _SIZING_OPTIONS else ""))
+    if isinstance(exc, ImportError) and "pip install" not in str(exc):
+        name = (getattr(exc, "name", None) or "").split(".")[0]
+        if name in _EXTRAS:
+            return (f"'{command}' needs the optional package {name}: pip install "
+                    f"'gagen[{_EXTRAS[name]}]'")
+        return f"cannot import {name or 'a module'}: {_one_line(exc)}"
+    if isinstance(exc, ArithmeticError):
+        return (f"a number overflowed in '{command}' ({type(exc).__name__}: "
+                f"{_one_line(exc)}); check the options' ranges")
+    return _one_line(exc)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -587,7 +768,7 @@ def main(argv: list[str] | None = None) -> int:
         code = _exit_code(exc)
         if code is None or args.traceback:
             raise
-        print(f"gagen: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"gagen: error: {_message(exc, args.command)}", file=sys.stderr)
         return code
 
 

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..csvtext import text_cell
 from ..sim.simulate import COMPILED_METHODS, SimulationResult
 
 if TYPE_CHECKING:
@@ -157,8 +158,8 @@ def run_simulate(model="rrr", *, duration: float = 5.0, points: int = 501,
                  rtol: float = 1e-6, atol: float = 1e-8, step: float = 1e-3,
                  target: Sequence[float] | None = None, kp: Sequence[float] | None = None,
                  kd: Sequence[float] | None = None, gravity_compensation: bool = True,
-                 gif: bool = False, strict: bool = False,
-                 floating_base: bool = False) -> SimulateRun:
+                 gif: bool = False, strict: bool = False, floating_base: bool = False,
+                 html: bool = False, package_dirs=None) -> SimulateRun:
     """Direct dynamics from rest at q = 0 under a PD law; writes the CSV and figures.
 
     A floating base starts at the world's origin, unrotated; the PD law drives the joints
@@ -167,7 +168,8 @@ def run_simulate(model="rrr", *, duration: float = 5.0, points: int = 501,
     `target` is in degrees (metres for prismatic joints); `target`, `kp`, `kd` each one
     value or one per coordinate, the controller's defaults (see the module) where None.
     `method` None: dopri5 with the compiled backend, RK45 with lambdify. `strict` refuses
-    an inertia slightly off physical (gagen.load).
+    an inertia slightly off physical (gagen.load). `html` also writes simulate.html, the
+    run in 3-D (`SimulationResult.to_html`; a URDF's meshes found through `package_dirs`).
     """
     from ..sim.controllers import PD, default_controller, is_paper_robot
     from ..sim.simulate import simulate
@@ -194,6 +196,9 @@ def run_simulate(model="rrr", *, duration: float = 5.0, points: int = 501,
     run = SimulateRun(model, dyn.backend, method, result)
     folder = output_folder(out, model)
     run.files.append(result.to_csv(folder / "simulate.csv"))
+    if html:
+        log.info("writing the 3-D playback (simulate.html)...")
+        run.files.append(result.to_html(folder / "simulate.html", package_dirs))
     log.info("plotting...")
     from .figures import arm_gif, fig2_positions, fig3_arm
 
@@ -276,7 +281,7 @@ def _write_inverse_csv(run: InverseRun, path: Path) -> Path:
               + [f"tau_{c}" for c in names])
     with path.open("w", newline="") as fh:
         writer = csv.writer(fh)
-        writer.writerow(header)
+        writer.writerow([text_cell(name) for name in header])
         for row in np.column_stack([run.t, run.q, run.qd, run.qdd, run.tau]):
             writer.writerow([repr(float(v)) for v in row])
     return path

@@ -11,6 +11,16 @@ independently), or q0, qd0, kp, kd, target for every coordinate (each drawn on i
 or one of them for one coordinate, q0.q2=-10:10. Angles are in degrees (q0, target) and
 degrees per second (qd0), as in `simulate`; prismatic coordinates in m and m/s.
 
+A floating base (nq = nv + 1 per floating joint) starts at the world's origin, unrotated,
+and at rest, as in `simulate`. There, q0, qd0, kp, kd, target without a name vary the
+joints only; q0.<entry> names an entry of q (`dyn.configuration`: a floating joint
+base's position base_x, _y, _z in m), qd0.<coordinate> one of qd (`dyn.coordinates`:
+base_vx, _vy, _vz in m/s, base_wx, _wy, _wz in degrees per second). A quaternion's entries (base_qx ... _qw)
+cannot be drawn as angles and are refused, and so are kp, kd, target of a floating joint
+(it has no actuator). q is stored as (runs, samples, nq), named by the file's
+`configuration` attribute, qd and tau as (runs, samples, nv), named by `coordinates`; the
+statistics cover every entry of q (a quaternion's unitless), the fan figure the joints.
+
 Results go to a Zarr store (`.zarr`, chunked along the runs, written block by block, so a
 sweep larger than memory streams to disk; `zarr.open_group(path)` or
 `xarray.open_zarr(path)` read it) or to NumPy's `.npz` (kept in memory, then written;
@@ -25,15 +35,19 @@ import csv
 import fnmatch
 import logging
 import math
+import os
 import re
+import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ..csvtext import text_cell
+from ..manifest import CONFIGURATION, VELOCITY, joint_names
 from ..sim.batch import BatchPlan, blocks, prepare_batch, run_batch
-from .runs import load_dynamics, output_folder
+from .runs import default_out_dir, load_dynamics
 
 log = logging.getLogger(__name__)
 
@@ -80,6 +94,9 @@ def parse_variation(text: str) -> Variation:
                          "(0 <= P < 100)") from None
     if not (math.isfinite(low) and math.isfinite(high) and low <= high):
         raise ValueError(f"--vary {text!r}: LO and HI must be finite with LO <= HI")
+    if not math.isfinite(high - low):
+        raise ValueError(f"--vary {text!r}: HI - LO overflows; the range must be narrower "
+                         "than the largest float")
     return Variation(name, coordinate, low=low, high=high, text=text)
 
 
@@ -95,16 +112,17 @@ class SweepInputs:
     target: np.ndarray | None = None
 
 
-def draw_inputs(variations: list[Variation], runs: int, dyn, model, nominal, seed: int
+def draw_inputs(variations: list[Variation], runs: int, dyn, nominal, seed: int
                 ) -> SweepInputs:
     """Draw each varied quantity for every run (uniformly, independently; in the order of
-    `variations`, from one generator seeded with `seed`)."""
+    `variations`, from one generator seeded with `seed`). q0 has dyn.nq entries (the
+    rest: dyn.neutral()), the others dyn.nv."""
     rng = np.random.default_rng(seed)
     out = SweepInputs()
     defaults = dyn.parameters
     for v in variations:
         if v.name in STATE_TARGETS:
-            _draw_state(out, v, runs, dyn, model, nominal, rng)
+            _draw_state(out, v, runs, dyn, nominal, rng)
             continue
         names = [k for k in defaults if fnmatch.fnmatchcase(k, v.name)]
         if not names:
@@ -115,27 +133,83 @@ def draw_inputs(variations: list[Variation], runs: int, dyn, model, nominal, see
     return out
 
 
-def _draw_state(out: SweepInputs, v: Variation, runs: int, dyn, model, nominal, rng) -> None:
-    n = dyn.n
-    columns = list(range(n))
-    if v.coordinate is not None:
-        if v.coordinate not in dyn.coordinates:
-            raise KeyError(f"--vary {v.text!r}: no coordinate '{v.coordinate}' "
-                           f"(coordinates: {', '.join(dyn.coordinates)})")
-        columns = [dyn.coordinates.index(v.coordinate)]
-    base = {"q0": np.zeros(n), "qd0": np.zeros(n), "kp": nominal.c_spec(n)["kp"],
+@dataclass(frozen=True)
+class Entry:
+    """One entry of q (or of qd, kp, kd, target) as a sweep draws and reports it."""
+
+    name: str
+    unit: str  # "rad" (given and reported in degrees), "m", or "1" (a quaternion's entry)
+    joint: str
+    floating: bool  # an entry of a floating joint (which has no actuator)
+
+
+def state_entries(info, configuration: bool) -> list[Entry]:
+    """The entries of q (`configuration`, dyn.configuration's order) or of qd (dyn.coordinates'
+    order), each with its unit and joint."""
+    out = []
+    for joint in info.joints:
+        if joint.type == "floating":
+            units = ("m",) * 3 + (("1",) * 4 if configuration else ("rad",) * 3)
+            names = joint_names(joint, CONFIGURATION if configuration else VELOCITY)
+            out += [Entry(name, unit, joint.name, True) for name, unit in zip(names, units)]
+        else:
+            unit = "m" if joint.type == "prismatic" else "rad"
+            out.append(Entry(joint.name, unit, joint.name, False))
+    return out
+
+
+def _draw_state(out: SweepInputs, v: Variation, runs: int, dyn, nominal, rng) -> None:
+    entries = state_entries(dyn.info, configuration=v.name == "q0")
+    columns = _state_columns(v, entries, dyn.info.name)
+    if v.percent is not None and v.name in ANGLE_TARGETS:
+        raise ValueError(f"--vary {v.text!r}: give {v.name} as a range LO:HI (degrees)")
+    n = dyn.nv
+    base = {"q0": dyn.neutral(), "qd0": np.zeros(n), "kp": nominal.c_spec(n)["kp"],
             "kd": nominal.c_spec(n)["kd"], "target": nominal.c_spec(n)["target"]}[v.name]
     current = getattr(out, v.name)
     table = np.tile(base, (runs, 1)) if current is None else current
-    rotating = np.array([b.joint.type != "prismatic" for b in model.moving_bodies])
     for k in columns:
-        if v.percent is not None and v.name in ANGLE_TARGETS:
-            raise ValueError(f"--vary {v.text!r}: give {v.name} as a range LO:HI (degrees)")
         values = _uniform(v, base[k], runs, rng)
-        if v.percent is None and v.name in ANGLE_TARGETS and rotating[k]:
+        if v.percent is None and v.name in ANGLE_TARGETS and entries[k].unit == "rad":
             values = np.radians(values)
         table[:, k] = values
     setattr(out, v.name, table)
+
+
+def _state_columns(v: Variation, entries: list[Entry], model_name: str) -> list[int]:
+    """The entries a state --vary draws: the one it names, or every joint's (a floating
+    joint's entries only when named: its position and velocity, never its quaternion)."""
+    if v.coordinate is None:
+        columns = [k for k, e in enumerate(entries) if not e.floating]
+        if not columns and v.name in ("kp", "kd", "target"):
+            raise ValueError(f"--vary {v.text!r}: '{model_name}' has no joint, only a "
+                             f"floating base, which has no actuator: its {v.name} is not used")
+        if not columns:
+            floating = ", ".join(e.name for e in entries if e.unit != "1")
+            raise ValueError(f"--vary {v.text!r}: '{model_name}' has no joint, only a "
+                             f"floating base: name one of its entries, {v.name}.NAME "
+                             f"(NAME one of {floating})")
+        return columns
+    names = [e.name for e in entries]
+    if v.coordinate not in names:
+        what = "entry of q" if v.name == "q0" else "coordinate"
+        raise KeyError(f"--vary {v.text!r}: no {what} '{v.coordinate}' "
+                       f"({v.name}: {', '.join(names)})")
+    entry = entries[names.index(v.coordinate)]
+    if entry.unit == "1":
+        quaternion = ", ".join(e.name for e in entries if e.joint == entry.joint
+                               and e.unit == "1")
+        position = ", ".join(e.name for e in entries if e.joint == entry.joint
+                             and e.unit == "m")
+        raise ValueError(f"--vary {v.text!r}: {entry.name} is an entry of the unit "
+                         f"quaternion of floating joint '{entry.joint}' ({quaternion}), which "
+                         "cannot be drawn as an angle: vary the joints (q0=LO:HI) or the "
+                         f"joint's position ({position}, in m)")
+    if entry.floating and v.name in ("kp", "kd", "target"):
+        raise ValueError(f"--vary {v.text!r}: {entry.name} is a coordinate of floating "
+                         f"joint '{entry.joint}', which has no actuator: its {v.name} is "
+                         "not used")
+    return [names.index(v.coordinate)]
 
 
 def _uniform(v: Variation, default: float, runs: int, rng) -> np.ndarray:
@@ -147,12 +221,18 @@ def _uniform(v: Variation, default: float, runs: int, rng) -> np.ndarray:
 # ------------------------------------------------------------------------------ stores
 
 
+def _result_widths(nq: int, nv: int) -> dict[str, int]:
+    """The last axis of each result array: q has nq entries, qd and tau nv."""
+    return {"q": nq, "qd": nv, "tau": nv}
+
+
 class NpzStore:
     """The whole sweep in memory, written by np.savez_compressed at the end."""
 
-    def __init__(self, path: Path, runs: int, t: np.ndarray, n: int, attrs: dict):
+    def __init__(self, path: Path, runs: int, t: np.ndarray, nq: int, nv: int, attrs: dict):
         self.path, self.attrs = path, attrs
-        self.arrays = {name: np.empty((runs, t.size, n)) for name in ("q", "qd", "tau")}
+        self.arrays = {name: np.empty((runs, t.size, width))
+                       for name, width in _result_widths(nq, nv).items()}
         self.arrays["t"] = t
 
     def put(self, name: str, start: int, values: np.ndarray) -> None:
@@ -171,7 +251,7 @@ class NpzStore:
 class ZarrStore:
     """A Zarr group: arrays chunked along the runs, written block by block."""
 
-    def __init__(self, path: Path, runs: int, t: np.ndarray, n: int, attrs: dict):
+    def __init__(self, path: Path, runs: int, t: np.ndarray, nq: int, nv: int, attrs: dict):
         try:
             import zarr
         except ImportError:
@@ -182,12 +262,12 @@ class ZarrStore:
                                   "overwriting it")
         self.group = zarr.open_group(str(path), mode="w")
         self.group.attrs.update(attrs)
-        self.chunk = max(1, CHUNK_BYTES // (t.size * n * 8))
+        self.chunk = max(1, CHUNK_BYTES // (t.size * max(nq, nv) * 8))
         self.runs = runs
         self.group.create_array("t", data=t)
-        for name in ("q", "qd", "tau"):
-            self.group.create_array(name, shape=(runs, t.size, n), dtype="f8",
-                                    chunks=(min(self.chunk, runs), t.size, n))
+        for name, width in _result_widths(nq, nv).items():
+            self.group.create_array(name, shape=(runs, t.size, width), dtype="f8",
+                                    chunks=(min(self.chunk, runs), t.size, width))
 
     def put(self, name: str, start: int, values: np.ndarray) -> None:
         if name not in self.group:
@@ -200,13 +280,14 @@ class ZarrStore:
         self.group.attrs.update(attrs)
 
 
-def open_store(path: Path, runs: int, t: np.ndarray, n: int, attrs: dict):
-    """A store for `path` by its suffix: .zarr (streamed) or .npz (in memory)."""
+def open_store(path: Path, runs: int, t: np.ndarray, nq: int, nv: int, attrs: dict):
+    """A store for `path` by its suffix: .zarr (streamed) or .npz (in memory); q has nq
+    entries per sample, qd and tau nv."""
     suffix = path.suffix.lower()
     if suffix == ".zarr":
-        return ZarrStore(path, runs, t, n, attrs)
+        return ZarrStore(path, runs, t, nq, nv, attrs)
     if suffix == ".npz":
-        return NpzStore(path, runs, t, n, attrs)
+        return NpzStore(path, runs, t, nq, nv, attrs)
     raise ValueError(f"--out {path}: the file must end in .zarr or .npz")
 
 
@@ -215,7 +296,131 @@ def default_out(model) -> Path:
     import importlib.util
 
     name = "sweep.zarr" if importlib.util.find_spec("zarr") else "sweep.npz"
-    return output_folder(None, model) / name
+    return default_out_dir(model) / name  # created when the sweep writes, not before
+
+
+# --------------------------------------------------------------- will it fit? (before anything)
+
+# What one run keeps in memory besides its results, beyond its inputs' numbers: a PD
+# controller of its own (a Python object and three arrays) when gains or targets vary.
+CONTROLLER_BYTES = 1024
+
+
+@dataclass(frozen=True)
+class StoreSize:
+    """What a sweep will hold, in bytes: `results` (q, qd, tau of every run), `inputs` (each
+    run's q0, qd0, parameters, gains, target and statistics, as stored), and `memory`
+    (what the process holds besides an .npz store: the draws and the batch's tables,
+    about three copies of the inputs, the final states, one block of results, and the
+    runs' own controllers)."""
+
+    results: int
+    inputs: int
+    memory: int
+
+    def in_memory(self, suffix: str) -> int:
+        return self.memory + (self.results + self.inputs if suffix == ".npz" else 0)
+
+    @property
+    def on_disk(self) -> int:
+        return self.results + self.inputs  # uncompressed: the worst case
+
+
+def store_size(runs: int, points: int, nq: int, nv: int, parameters: int,
+               per_run_controllers: bool = False) -> StoreSize:
+    """The sizes of a sweep of `runs` runs of `points` samples (StoreSize)."""
+    results = 8 * runs * points * (nq + 2 * nv)
+    inputs = 8 * runs * (nq + 4 * nv + parameters + 4)
+    block = min(results, BLOCK_BYTES)
+    memory = 3 * inputs + 8 * runs * nv + block + (
+        CONTROLLER_BYTES * runs if per_run_controllers else 0)
+    return StoreSize(results, inputs, memory)
+
+
+def check_store_fits(path: Path, runs: int, points: int, nq: int, nv: int, parameters: int,
+                     per_run_controllers: bool = False) -> None:
+    """Refuse (ValueError naming --runs and --points) a sweep whose store cannot fit: in
+    memory for .npz (and for every store, the inputs and one block), on disk for both."""
+    size = store_size(runs, points, nq, nv, parameters, per_run_controllers)
+    suffix = path.suffix.lower()
+    shape = (f"--runs {runs:,} x --points {points:,} x {nq + 2 * nv} values (q, qd, tau of "
+             f"{nv} coordinates)")
+    need, free = size.in_memory(suffix), available_memory()
+    if free is not None and need > free:
+        advice = ("write --out FILE.zarr (streamed to disk) or use fewer --runs or --points"
+                  if suffix == ".npz" else "use fewer --runs")
+        raise ValueError(f"{shape}: the sweep needs {_bytes(need)} of memory"
+                         + (" (an .npz store is kept in memory until written)"
+                            if suffix == ".npz" else " (the runs' inputs and one block)")
+                         + f", and {_bytes(free)} is available: {advice}")
+    disk = free_disk(path)
+    if disk is not None and size.on_disk > disk:
+        raise ValueError(f"{shape}: --out {path} needs up to {_bytes(size.on_disk)} on disk "
+                         f"(uncompressed), and {_bytes(disk)} is free there: use fewer --runs "
+                         "or --points, or another folder")
+
+
+def available_memory() -> int | None:
+    """Bytes of memory this process can still take: the system's available memory, or
+    the cgroup's limit less its use (a container) if lower; None where neither is known."""
+    values = []
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                values.append(int(line.split()[1]) * 1024)
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        used = int(Path("/sys/fs/cgroup/memory.current").read_text().strip())
+        if limit.isdigit():
+            values.append(max(0, int(limit) - used))
+    except (OSError, ValueError):
+        pass
+    if not values:
+        try:
+            values.append(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+        except (ValueError, OSError, AttributeError):
+            pass
+    room = _address_space_left()
+    if room is not None:
+        values.append(room)
+    return min(values) if values else None
+
+
+def _address_space_left() -> int | None:
+    """What this process's address-space limit (ulimit -v) leaves, or None (no limit)."""
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft == resource.RLIM_INFINITY:
+            return None
+        status = Path("/proc/self/status").read_text()
+        size = next(int(line.split()[1]) * 1024 for line in status.splitlines()
+                    if line.startswith("VmSize:"))
+        return max(0, soft - size)
+    except (ImportError, OSError, ValueError, StopIteration):
+        return None
+
+
+def free_disk(path: Path) -> int | None:
+    """Free bytes on the file system `path` would be written to (its nearest existing
+    folder); None where it cannot be told."""
+    folder = Path(os.path.abspath(path)).parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        return shutil.disk_usage(folder).free
+    except OSError:
+        return None
+
+
+def _bytes(count: int) -> str:
+    for unit, size in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if count >= size:
+            return f"{count / size:,.1f} {unit}"
+    return f"{count} bytes"
 
 
 # ------------------------------------------------------------------------------- sweep
@@ -228,8 +433,8 @@ class SweepRun:
     model: object
     runs: int
     failed: int
-    final: np.ndarray  # (runs, n) final coordinates, NaN for failed runs
-    nominal_final: np.ndarray
+    final: np.ndarray  # (runs, nq) final configurations, NaN for failed runs
+    nominal_final: np.ndarray  # (nq,)
     seconds: float
     files: list[Path] = field(default_factory=list)
     statistics: list[dict] = field(default_factory=list)
@@ -240,44 +445,69 @@ def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
               rtol: float = 1e-6, atol: float = 1e-8, step: float = 1e-3,
               threads: int | None = None, scheduler: str | None = None,
               out: str | Path | None = None, cache_dir=None, plot: bool = True,
-              block_runs: int | None = None) -> SweepRun:
+              block_runs: int | None = None, html: bool = False, html_runs=None,
+              html_mode: str = "overlay", package_dirs=None, strict: bool = False,
+              floating_base: bool = False) -> SweepRun:
     """Run `runs` simulations of `model` under the `simulate` command's controller, with the
-    --vary draws; stream them to `out` in blocks; plot the fan and write the statistics."""
+    --vary draws; stream them to `out` in blocks; plot the fan and write the statistics.
+
+    Every run starts from `dyn.neutral()` at rest, but for its draws (a floating base: at
+    the world's origin, unrotated; see the module docstring for what q0 and qd0 vary
+    there). `strict` and `floating_base` are `gagen.load`'s.
+
+    `html` also writes `out`'s stem + .html: the runs `html_runs` (default: the nominal run,
+    then the first HTML_RUNS - 1 runs that reached the end) in 3-D, overlaid with all but
+    the first ghosted, or one after the other (`html_mode` "sequence")."""
+    from ..model.resolve import resolve_model
     from ..sim.controllers import PD, default_controller
     from ..sim.simulate import simulate
 
     parsed = [parse_variation(text) for text in variations]
+    for i in html_runs or ():
+        if not 0 <= i < runs:
+            raise ValueError(f"--html-runs {i}: there are runs 0 to {runs - 1}")
+    if out:  # a first look with one coordinate, before the model is even read
+        check_store_fits(Path(out), runs, points, 1, 1, 0)
+    model = resolve_model(model, strict, floating_base)
+    path = Path(out) if out else default_out(model)
+    check_store_fits(path, runs, points, model.nq, model.dof, len(model.parameters),
+                     per_run_controllers=any(v.name in ("kp", "kd", "target") for v in parsed))
     model, dyn = load_dynamics(model, "compiled", cache_dir)
     nominal = default_controller(dyn)
-    draws = draw_inputs(parsed, runs, dyn, model, nominal, seed)
+    draws = draw_inputs(parsed, runs, dyn, nominal, seed)
     controller = nominal
     if draws.kp is not None or draws.kd is not None or draws.target is not None:
-        spec = nominal.c_spec(dyn.n)
+        spec = nominal.c_spec(dyn.nv)
         controller = [PD(kp=_row(draws.kp, i, spec["kp"]), kd=_row(draws.kd, i, spec["kd"]),
                          target=_row(draws.target, i, spec["target"]),
                          gravity_compensation=nominal.gravity_compensation)
                       for i in range(runs)]
     options = {"h": step} if method == "rk4" else {}
     span, t_eval = (0.0, duration), np.linspace(0.0, duration, points)
-    plan = prepare_batch(dyn, span, draws.q0 if draws.q0 is not None else np.zeros((runs, dyn.n)),
-                         draws.qd0, controller, draws.p or None, method, rtol, atol, t_eval,
-                         **options)
-    nominal_run = simulate(dyn, span, np.zeros(dyn.n), None, nominal, method=method, rtol=rtol,
-                           atol=atol, t_eval=t_eval, **options)
-    path = Path(out) if out else default_out(model)
+    q0 = draws.q0 if draws.q0 is not None else np.tile(dyn.neutral(), (runs, 1))
+    plan = prepare_batch(dyn, span, q0, draws.qd0, controller, draws.p or None, method, rtol,
+                         atol, t_eval, **options)
+    try:
+        nominal_run = simulate(dyn, span, dyn.neutral(), None, nominal, method=method,
+                               rtol=rtol, atol=atol, t_eval=t_eval, **options)
+    except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:  # say which run
+        raise type(exc)(f"the nominal run (no --vary draw): {exc}") from None
     path.parent.mkdir(parents=True, exist_ok=True)
-    attrs = {"model": model.name, "coordinates": list(dyn.coordinates),
-             "parameters": list(dyn.parameters), "method": method, "rtol": rtol,
-             "atol": atol, "duration": duration, "runs": runs, "seed": seed,
-             "vary": [v.text for v in parsed], "controller": repr(nominal)}
-    store = open_store(path, runs, t_eval, dyn.n, attrs)
-    size = block_runs or _block_runs(runs, points, dyn.n, getattr(store, "chunk", 1))
+    attrs = {"model": model.name, "configuration": list(dyn.configuration),
+             "coordinates": list(dyn.coordinates), "parameters": list(dyn.parameters),
+             "method": method, "rtol": rtol, "atol": atol, "duration": duration,
+             "runs": runs, "seed": seed, "vary": [v.text for v in parsed],
+             "controller": repr(nominal)}
+    store = open_store(path, runs, t_eval, dyn.nq, dyn.nv, attrs)
+    size = block_runs or _block_runs(runs, points, dyn.nq + 2 * dyn.nv,
+                                     getattr(store, "chunk", 1))
     log.info(f"{runs:,} runs of {duration:g} s with {method}, in {len(blocks(runs, size))} "
              f"block(s) of up to {size:,} runs, to {path}")
     start = time.perf_counter()
     client = _client(scheduler)
+    picked = PickedRuns(html_runs, HTML_RUNS - 1) if html else None
     try:
-        final, fan, failures = _run_blocks(dyn, plan, store, size, threads, client)
+        final, fan, failures = _run_blocks(dyn, plan, store, size, threads, client, picked)
     finally:
         if client is not None:
             client.close()
@@ -288,31 +518,102 @@ def run_sweep(model="rrr", *, runs: int, variations: list[str], seed: int = 0,
     run.statistics = final_statistics(run, dyn)
     run.files.append(write_statistics(run, path.with_name(f"{path.stem}_final.csv")))
     if plot:
-        from .figures import fig2_fan
-
-        log.info("plotting...")
-        run.files.append(fig2_fan(t_eval, fan, nominal_run.q, model,
-                                  path.with_name(f"{path.stem}_fan.png"), total=runs))
+        figure = _plot_fan(t_eval, fan, nominal_run.q, model, dyn,
+                           path.with_name(f"{path.stem}_fan.png"), runs)
+        run.files += [figure] if figure is not None else []
+    if picked is not None:
+        run.files.append(_write_html(path.with_name(f"{path.stem}.html"), dyn, plan,
+                                     nominal_run, picked, html_runs is None, html_mode,
+                                     package_dirs))
     return run
 
 
-def _run_blocks(dyn, plan: BatchPlan, store, size: int, threads, client):
-    """Run the plan block by block into the store: (final q (N, n), NaN for failed runs;
-    the first FAN_RUNS runs' q; the messages of up to FAILURES_KEPT failed runs)."""
+def _plot_fan(t, fan, nominal_q, model, dyn, path: Path, total: int) -> Path | None:
+    """The fan figure of the joints (a floating base's entries left out: its path is in
+    the store); None, with a log line, for a model with no joint."""
+    from .figures import fig2_fan
+
+    shown = model
+    if dyn.nq != dyn.nv:
+        from ..runtime.manifold import plain_entries
+        from .runs import _joints_only
+
+        joints, _ = plain_entries(dyn.info)
+        if not joints.size:
+            log.info("no fan figure: the model has no joint, only a floating base (its path "
+                     "is in the store)")
+            return None
+        fan, nominal_q, shown = fan[:, :, joints], nominal_q[:, joints], _joints_only(model)
+    log.info("plotting...")
+    return fig2_fan(t, fan, nominal_q, shown, path, total=total)
+
+
+HTML_RUNS = 10  # runs the HTML file shows by default (the nominal one and 9 more)
+
+
+class PickedRuns:
+    """The runs the HTML file shows, kept block by block as the sweep goes: the runs
+    `wanted`, or the first `count` runs that reached the end."""
+
+    def __init__(self, wanted, count: int):
+        self.wanted = None if wanted is None else list(dict.fromkeys(wanted))
+        self.count = count
+        self.q: dict[int, np.ndarray] = {}
+
+    def take(self, start: int, res) -> None:
+        if self.wanted is None:
+            for i in np.flatnonzero(res.ok):
+                if len(self.q) >= self.count:
+                    return
+                self.q[start + int(i)] = np.array(res.q[i])
+            return
+        for i in self.wanted:
+            if start <= i < start + len(res.ok):
+                if res.ok[i - start]:
+                    self.q[i] = np.array(res.q[i - start])
+                else:
+                    log.warning(f"--html-runs {i}: the run did not reach the end; left out "
+                                "of the HTML file")
+
+
+def _write_html(path: Path, dyn, plan: BatchPlan, nominal, picked: PickedRuns,
+                with_nominal: bool, mode: str, package_dirs) -> Path:
+    from ..viewer import write_html
+
+    order = [i for i in (picked.wanted or sorted(picked.q)) if i in picked.q]
+    q = [picked.q[i] for i in order]
+    p = [plan.p[0 if plan.p.shape[0] == 1 else i] for i in order]
+    labels = [f"run {i}" for i in order]
+    if with_nominal:
+        q, p, labels = [nominal.q, *q], [nominal.p, *p], ["nominal", *labels]
+    if not q:
+        raise ValueError("--html: none of the chosen runs reached the end")
+    log.info(f"writing the 3-D playback of {len(q)} runs ({path.name})...")
+    return write_html(path, dyn, nominal.t, np.array(q), p, mode=mode, labels=labels,
+                      package_dirs=package_dirs)
+
+
+def _run_blocks(dyn, plan: BatchPlan, store, size: int, threads, client,
+                picked: PickedRuns | None = None):
+    """Run the plan block by block into the store: (final q (N, nq), NaN for failed runs;
+    the first FAN_RUNS runs' q; the messages of up to FAILURES_KEPT failed runs); the
+    runs of the HTML file go to `picked`."""
     runs = plan.runs
     progress = ProgressBar(runs)
-    final = np.full((runs, dyn.n), np.nan)
+    final = np.full((runs, dyn.nq), np.nan)
     fan = None
     failures: dict[str, str] = {}
     for a, b in blocks(runs, size):
         res = run_batch(dyn, plan.rows(a, b), threads=threads, client=client,
                         progress=lambda done, _total, a=a: progress(a + done))
-        _store_block(store, plan, a, b, res)
+        _store_block(store, plan, a, b, res, dyn.nq)
         final[a:b][res.ok] = res.q[res.ok, -1]
         for i in np.flatnonzero(~res.ok)[: max(0, FAILURES_KEPT - len(failures))]:
             failures[str(a + i)] = res.message[i]
         if fan is None:
             fan = res.q[:FAN_RUNS].copy()
+        if picked is not None:
+            picked.take(a, res)
     return final, fan, failures
 
 
@@ -331,24 +632,27 @@ def _client(scheduler: str | None):
     return Client(scheduler, timeout=30)
 
 
-def _block_runs(runs: int, points: int, n: int, chunk: int) -> int:
-    """Runs per block: q, qd, tau of a block within BLOCK_BYTES, a whole number of chunks."""
-    size = max(1, BLOCK_BYTES // (3 * points * n * 8))
+def _block_runs(runs: int, points: int, width: int, chunk: int) -> int:
+    """Runs per block: q, qd, tau of a block (`width` = nq + 2 nv values a sample) within
+    BLOCK_BYTES, a whole number of chunks."""
+    size = max(1, BLOCK_BYTES // (points * width * 8))
     return min(runs, max(chunk, size // chunk * chunk))
 
 
-def _store_block(store, plan: BatchPlan, a: int, b: int, res) -> None:
+def _store_block(store, plan: BatchPlan, a: int, b: int, res, nq: int) -> None:
+    """Runs a .. b-1 into the store: results, statistics and inputs (q0 (., nq), qd0, kp,
+    kd, target (., nv))."""
     for name in ("q", "qd", "tau"):
         store.put(name, a, getattr(res, name))
     for name in ("status", "nfev", "steps", "rejected"):
         store.put(name, a, getattr(res, name))
-    n = plan.y0.shape[1] // 2
-    store.put("q0", a, plan.y0[a:b, :n])
-    store.put("qd0", a, plan.y0[a:b, n:])
+    nv = plan.y0.shape[1] - nq
+    store.put("q0", a, plan.y0[a:b, :nq])
+    store.put("qd0", a, plan.y0[a:b, nq:])
     rows = plan.rows(a, b)
     store.put("p", a, np.broadcast_to(rows.p, (b - a, plan.p.shape[1])))
     for name in ("kp", "kd", "target"):
-        store.put(name, a, np.broadcast_to(rows.control[name], (b - a, n)))
+        store.put(name, a, np.broadcast_to(rows.control[name], (b - a, nv)))
 
 
 class ProgressBar:
@@ -382,15 +686,16 @@ STAT_COLUMNS = ("coordinate", "unit", "nominal", "mean", "std", "min", "p5", "me
 
 
 def final_statistics(run: SweepRun, dyn) -> list[dict]:
-    """Per coordinate: the final value's nominal, mean, std, min, percentiles and max over
-    the runs that reached the end (degrees for rotating joints, m for prismatic)."""
+    """Per entry of q (`dyn.configuration`): the final value's nominal, mean, std, min,
+    percentiles and max over the runs that reached the end (degrees for rotating joints,
+    m for prismatic ones and a floating base's position, unitless "1" for its quaternion)."""
     good = run.final[~np.isnan(run.final).any(axis=1)]
     rows = []
-    for k, (name, body) in enumerate(zip(dyn.coordinates, run.model.moving_bodies)):
-        degrees = body.joint.type != "prismatic"
+    for k, entry in enumerate(state_entries(dyn.info, configuration=True)):
+        degrees = entry.unit == "rad"
         scale = 180.0 / math.pi if degrees else 1.0
         x = good[:, k] * scale
-        row = {"coordinate": name, "unit": "deg" if degrees else "m",
+        row = {"coordinate": entry.name, "unit": "deg" if degrees else entry.unit,
                "nominal": run.nominal_final[k] * scale}
         if x.size:
             p5, median, p95 = np.percentile(x, [5, 50, 95])
@@ -405,7 +710,7 @@ def write_statistics(run: SweepRun, path: Path) -> Path:
         writer = csv.writer(fh)
         writer.writerow(STAT_COLUMNS)
         for row in run.statistics:
-            writer.writerow([row.get(c, "") if c in ("coordinate", "unit")
+            writer.writerow([text_cell(row.get(c, "")) if c in ("coordinate", "unit")
                              else repr(float(row[c])) if c in row else "" for c in STAT_COLUMNS])
     return path
 
@@ -417,12 +722,13 @@ def print_sweep_report(run: SweepRun) -> None:
           f"{run.failed:,} failed")
     print(f"gagen: final state over the runs that reached the end "
           f"({run.runs - run.failed:,}):")
-    print(f"  {'':<10}{'unit':>5}{'nominal':>10}{'mean':>10}{'std':>9}{'p5':>10}{'p95':>10}")
+    w = max([10] + [len(row["coordinate"]) + 1 for row in run.statistics])
+    print(f"  {'':<{w}}{'unit':>5}{'nominal':>10}{'mean':>10}{'std':>9}{'p5':>10}{'p95':>10}")
     for row in run.statistics:
         if "mean" not in row:
-            print(f"  {row['coordinate']:<10}{row['unit']:>5}{row['nominal']:>10.3f}   (no run)")
+            print(f"  {row['coordinate']:<{w}}{row['unit']:>5}{row['nominal']:>10.3f}   (no run)")
             continue
-        print(f"  {row['coordinate']:<10}{row['unit']:>5}{row['nominal']:>10.3f}"
+        print(f"  {row['coordinate']:<{w}}{row['unit']:>5}{row['nominal']:>10.3f}"
               f"{row['mean']:>10.3f}{row['std']:>9.3f}{row['p5']:>10.3f}{row['p95']:>10.3f}")
     for f in run.files:
         print(f"gagen: wrote {f}")

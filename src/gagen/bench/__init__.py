@@ -2,8 +2,9 @@
 
 Modules: `timing` (the interleaved runner every section uses), `peers` (Pinocchio, PyDy
 and plain SymPy versions of the same robot), `percall`, `batched`, `simulation`,
-`scaling`, `coldbuild`, `pinocchio_cpp`, `floating`, `derivatives`, `report` (report.md and PNG plots) and `run` (the whole suite). Pinocchio and
-PyDy are optional (`pip install gagen[bench]`); without them their rows are skipped.
+`scaling`, `coldbuild`, `pinocchio_cpp`, `floating`, `centroidal`, `taskspace`,
+`derivatives`, `casadi`, `report` (report.md and PNG plots) and `run` (the whole suite).
+Pinocchio and PyDy are optional (`pip install gagen[bench]`); without them their rows are skipped.
 
 This module holds only the command's description (gagen.app.cli parses the command line);
 the measurement code is imported when it runs.
@@ -44,6 +45,18 @@ Default (a few minutes on 2 cores):
   regressor         the Panda's regressor per call against Pinocchio's
                     computeJointTorqueRegressor; identification from 10,000 samples
                     (gagen.identify against Pinocchio's regressor in a loop + lstsq)
+  centroidal        ANYmal C's centre of mass, A_g, its bias d/dt A_g qd and d/dt A_g
+                    against Pinocchio's centerOfMass, computeCentroidalMap, ccrba, dccrba
+                    and computeCentroidalMapTimeVariation
+  taskspace         a frame's J̇ q̇, J̇ and operational-space inertia on the Panda's tool and
+                    an ANYmal C foot against Pinocchio (forwardKinematics +
+                    getFrameClassicalAcceleration, computeJointJacobiansTimeVariation +
+                    getFrameJacobianTimeVariation, computeMinverse + Jacobian products)
+  casadi            gagen.casadi against adam's CasADi dynamics (the Panda with fixed
+                    fingers, ANYmal C): forward dynamics and its Jacobian per evaluation
+                    inside CasADi (SX, and generated C at -O3; adam's compiles cached in
+                    the cache folder), and the docs' IPOPT swing on each (needs casadi,
+                    adam-robotics: pip install gagen[bench])
 --only SECTION ... runs the named sections alone.
 Candidates are timed interleaved (round-robin over the repeats); reported are medians,
 interquartile ranges and ratios to a baseline."""

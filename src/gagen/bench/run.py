@@ -4,7 +4,8 @@ Sections: per call on rrr (gagen's backends, Pinocchio, PyDy, plain SymPy), batc
 forward dynamics, the paper's 5-s simulation with each integrator, the scaling study
 (cold builds of chains and URDF robots), the derivatives (per call on rrr and the Panda
 against Pinocchio and central differences; the derivative module's cold build) and, with
---full, the Panda against Pinocchio.
+--full, the Panda, the floating bases, the regressor and the centroidal dynamics against
+Pinocchio.
 Writes results.json (after every section, so an interrupted run keeps what it measured),
 report.md and the PNG plots into the output folder.
 """
@@ -27,7 +28,8 @@ from . import peers
 from .common import PANDA, Progress, compiled, find_urdf_dir, machine_info, optional
 
 SECTIONS = ("percall", "batched", "simulation", "throughput", "scaling", "derivatives",
-            "panda", "floating", "regressor")
+            "panda", "floating", "regressor", "centroidal",
+            "taskspace", "casadi")
 
 
 @dataclass
@@ -50,6 +52,8 @@ class Settings:
     identify_repeats: int = 5
     identify_samples: int = 10_000
     derivatives_repeats: int = 21
+    casadi_repeats: int = 11
+    casadi_solve_repeats: int = 1
     sections: tuple[str, ...] = ("percall", "batched", "simulation", "throughput", "scaling",
                                  "derivatives")
     scaling_models: list[str] | None = None  # None: the mode's default list
@@ -65,7 +69,7 @@ class Settings:
                        panda_repeats=3, scaling_models=["chain:2"], throughput_repeats=2,
                        throughput_runs=8, throughput_panda_runs=0, throughput_dask_chunks=0,
                        regressor_repeats=3, identify_repeats=1, identify_samples=500,
-                       derivatives_repeats=3)
+                       derivatives_repeats=3, casadi_repeats=3)
         return cls()
 
 
@@ -80,6 +84,7 @@ class Bench:
         self.progress = progress or Progress()
         self.scratch = Path(tempfile.mkdtemp(prefix="gagen-bench-"))
         self.cache_dir = Path(cache_dir) if cache_dir else self.scratch / "rrr"
+        self.user_cache_dir = cache_dir
         self._rrr: dict | None = None
         self._rrr_error: str | None = None
         self.loaded: dict = {}  # scaling study's models, by name, for later sections
@@ -96,7 +101,8 @@ class Bench:
                                      "throughput": settings.throughput_repeats,
                                      "regressor": settings.regressor_repeats,
                                      "identify": settings.identify_repeats,
-                                     "derivatives": settings.derivatives_repeats}},
+                                     "derivatives": settings.derivatives_repeats,
+                                     "casadi": settings.casadi_repeats}},
             "notes": [],
         }
 
@@ -259,6 +265,38 @@ class Bench:
         rows = floating_rows(folder, self.scratch / "floating", s.panda_repeats, s.target_s,
                              progress=lambda text: self.progress("floating", text))
         return {"rows": rows, "repeats": s.panda_repeats}
+    def centroidal(self) -> dict:
+        from .centroidal import ROBOT, centroidal_rows, goal_notes
+
+        s = self.settings
+        folder = find_urdf_dir(self.urdf_dir, needed=ROBOT)
+        if folder is None:
+            note = f"{ROBOT} was not found: the centroidal section is skipped (--urdf-dir)"
+            self.results["notes"].append(note)
+            return {"rows": [], "skipped": note}
+        rows = centroidal_rows(folder, self.scratch / "centroidal", s.panda_repeats,
+                               s.target_s, progress=lambda text: self.progress("centroidal",
+                                                                               text))
+        for note in goal_notes(rows):
+            self._note("centroidal", note)
+        return {"rows": rows, "repeats": s.panda_repeats}
+
+    def taskspace(self) -> dict:
+        from .common import PANDA
+        from .taskspace import goal_notes, taskspace_rows
+
+        s = self.settings
+        folder = find_urdf_dir(self.urdf_dir, needed=PANDA)
+        if folder is None:
+            note = "the shared URDFs were not found: the task-space section is skipped"
+            self.results["notes"].append(note)
+            return {"rows": [], "skipped": note}
+        rows = taskspace_rows(folder, self.scratch / "taskspace", s.panda_repeats,
+                              s.target_s, progress=lambda text: self.progress("taskspace", text))
+        for note in goal_notes(rows):
+            self._note("taskspace", note)
+        return {"rows": rows, "repeats": s.panda_repeats}
+
     def derivatives(self) -> dict:
         import gagen
 
@@ -376,6 +414,25 @@ class Bench:
         return {"rows": rows, "identify": identify, "repeats": s.regressor_repeats,
                 "identify_repeats": s.identify_repeats}
 
+    def casadi(self) -> dict:
+        from .casadi import casadi_section, goal_notes
+
+        s = self.settings
+        folder = find_urdf_dir(self.urdf_dir, needed=PANDA)
+        # adam's compiled Jacobians take minutes: kept from run to run in gagen's cache (or
+        # --cache-dir), by a hash of their C
+        from ..building.cache import default_cache_dir
+
+        cache = Path(self.user_cache_dir or default_cache_dir()) / "bench-casadi"
+        section = casadi_section(folder, self.scratch / "casadi", cache, s.casadi_repeats,
+                                 s.casadi_solve_repeats, s.target_s,
+                                 progress=lambda text: self.progress("casadi", text))
+        if section.get("skipped"):
+            self._note("casadi", f"The casadi section is skipped: {section['skipped']}.")
+        for note in goal_notes(section):
+            self._note("casadi", note)
+        return section
+
     # -- the run ---------------------------------------------------------------------
 
     def save(self) -> Path:
@@ -389,7 +446,8 @@ class Bench:
         titles = {"percall": "per call", "batched": "batched", "simulation": "simulation",
                   "throughput": "throughput", "scaling": "scaling",
                   "derivatives": "derivatives", "panda": "panda", "floating": "floating",
-                  "regressor": "regressor"}
+                  "regressor": "regressor", "centroidal": "centroidal",
+                  "taskspace": "task space", "casadi": "casadi"}
         try:
             if {"percall", "batched", "simulation", "throughput"} & set(self.settings.sections):
                 start = time.perf_counter()

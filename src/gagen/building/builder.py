@@ -19,7 +19,6 @@ import subprocess
 import sysconfig
 import tempfile
 import time
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,7 +26,7 @@ from .. import __version__
 from ..codegen.config import CodegenConfig
 from ..codegen.derivatives import generate_derivatives
 from ..codegen.render import c_identifier, generate, write_sources
-from ..errors import BuildError, CompilerNotFoundError
+from ..errors import BuildError, CompilerNotFoundError, warn_user
 from ..model.model import Model
 from ..runtime.compiled import CompiledDynamics
 from ..symbolic.derivation import derivation_for, derive_equations
@@ -43,7 +42,10 @@ from .cache import (  # noqa: F401 (re-exported: the cache's API was here)
     compile_flags,
     default_cache_dir,
     discard_cache_entry,
+    discard_damaged,
+    forget_module,
     generator_digest,
+    identity_problem,
     import_extension,
     index_lookup,
     index_record,
@@ -63,6 +65,7 @@ class BuildReport:
     ops_before_cse: int = 0
     ops_after_cse: int = 0
     cached: bool = False
+    source_key: str = ""  # the KEY the module carries (source_key)
 
 
 def source_key(model: Model, derivation: str = "auto", config: CodegenConfig | None = None,
@@ -366,16 +369,17 @@ def build(model: Model, out: Path | None = None, cache_dir: Path | None = None,
         cache = usable_cache_dir(Path(cache_dir) if cache_dir else default_cache_dir())
         final = cache / f"{name}-{build_key(src_key, flags)[:16]}"
         if cached_module_is_intact(final, f"{name}{suffix}"):
-            return final / f"{name}{suffix}", BuildReport(model.name, name, final, cached=True)
+            return final / f"{name}{suffix}", BuildReport(model.name, name, final, cached=True,
+                                                          source_key=src_key)
         if final.exists():
-            warnings.warn(f"gagen: the cache entry {final} is corrupt or incomplete "
-                          "(its module does not match its checksum); rebuilding it",
-                          CacheWarning, stacklevel=3)
+            warn_user(f"gagen: the cache entry {final} is corrupt or incomplete (its module "
+                      "does not match its checksum); rebuilding it", CacheWarning)
+            forget_module(final / f"{name}{suffix}")
             discard_cache_entry(final)
         clean_abandoned_builds(cache)
     else:
         final = Path(out)
-    report = BuildReport(model.name, name, final)
+    report = BuildReport(model.name, name, final, source_key=src_key)
     progress = Progress(report, verbose)
     what = "the derivatives of " if derivatives else ""
     progress.say(f"building {what}'{model.name}' ({model.dof} coordinates) into {final}")
@@ -498,17 +502,28 @@ def _checked_and_recorded(module, key: str, model: Model, cache_dir, input_diges
 
 
 def _import_built(model: Model, options: dict):
-    """Build (or find in the cache) and import a module; a cached module whose intact bytes
-    do not import (a library it links against changed) is rebuilt once."""
+    """Build (or find in the cache) and import a module, checked to be the module of these
+    sources (its KEY). A cached module that fails to import for any reason (a library it
+    links against changed, another model's module in its place) or proves to be another
+    is damaged: it is rebuilt once, with a CacheWarning."""
     path, report = build(model, **options)
+    module, problem = _imported(path, report)
+    if problem is None:
+        return module
+    if not report.cached:
+        raise BuildError(f"the module just built for '{model.name}' {problem}")
+    discard_damaged(path, problem)
+    path, report = build(model, **options)
+    module, problem = _imported(path, report)
+    if problem is not None:
+        raise BuildError(f"the module rebuilt for '{model.name}' {problem}")
+    return module
+
+
+def _imported(path: Path, report: BuildReport):
+    """(module, None), or (None or the module, why it cannot be used)."""
     try:
-        return import_extension(path, report.module_name)
-    except ImportError as exc:
-        if not report.cached:
-            raise BuildError(f"the module just built for '{model.name}' does not import: "
-                             f"{exc}") from None
-        warnings.warn(f"gagen: the cached module {path} does not import ({exc}); "
-                      "rebuilding it", CacheWarning, stacklevel=3)
-        discard_cache_entry(path.parent)
-        path, report = build(model, **options)
-        return import_extension(path, report.module_name)
+        module = import_extension(path, report.module_name)
+    except Exception as exc:  # noqa: BLE001 - whatever a damaged library's import raises
+        return None, f"does not import ({type(exc).__name__}: {exc})"
+    return module, identity_problem(module, report.source_key)

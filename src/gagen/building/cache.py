@@ -5,10 +5,19 @@ holds the module, its sources and the module's SHA-256, checked before every imp
 index maps a key of the *input* (the bytes of the model file or URDF, the options, gagen's
 version and pipeline, the ABI) to the module built from it, so that loading a model built
 before reads neither the model nor SymPy.
+
+A checksum says the bytes are those written, not that they are the right module: each
+module carries its own key (`KEY`, the hash of its sources), which the index records and
+the builder expects, and which is checked after every import from the cache. A module that
+fails to import for any reason, or proves to be another (another model's, another
+generator's), is damaged: it is warned about (CacheWarning), discarded and rebuilt. A
+module once imported stays loaded in the process under its path (the dynamic loader and
+Python both keep it), so its replacement is imported from a private copy.
 """
 
 from __future__ import annotations
 
+import atexit
 import hashlib
 import importlib
 import importlib.machinery
@@ -22,7 +31,6 @@ import sys
 import sysconfig
 import tempfile
 import time
-import warnings
 from functools import cache as _memoized
 from importlib import resources
 from pathlib import Path
@@ -36,6 +44,10 @@ PORTABLE_FLAGS = ("-DGAGEN_KERNEL=",)
 # The kernels once, for this CPU's fused multiply-add (see compile_flags)
 FMA_FLAGS = ("-mfma", "-DGAGEN_KERNEL=")
 _loaded_modules: dict[str, object] = {}
+# Paths whose module this process imported (or tried to) and then discarded as damaged: the
+# dynamic loader would hand back the old library for that path, so the next import of a
+# module there loads a copy (import_extension).
+_stale_paths: set[str] = set()
 
 
 # The sub-packages whose code (and templates) decides what the generated sources say.
@@ -171,11 +183,15 @@ def _referenced_files(path: Path) -> list[bytes] | None:
 
 
 def index_lookup(cache: Path, key: str):
-    """The module recorded for an input key, imported, or None (no record, or the module is
-    gone or damaged: the caller builds again, which repairs the entry)."""
+    """The module recorded for an input key, imported, or None (no record, a record of an
+    earlier gagen without the module's key, or the module is gone or damaged: the caller
+    builds again, which repairs the entry; a module that imports but is not the one
+    recorded is discarded here with a CacheWarning)."""
     try:
         record = json.loads((cache / "index" / key[:40]).read_text())
     except (OSError, ValueError):
+        return None
+    if not isinstance(record, dict):
         return None
     if "shipped" in record:
         try:
@@ -184,12 +200,41 @@ def index_lookup(cache: Path, key: str):
             return None
     entry = cache / str(record.get("entry", ""))
     module_file = str(record.get("module", ""))
-    if not module_file or not cached_module_is_intact(entry, module_file):
+    expected = record.get("key")
+    if not (module_file and isinstance(expected, str)) \
+            or not cached_module_is_intact(entry, module_file):
         return None
+    path = entry / module_file
     try:
-        return import_extension(entry / module_file, module_file.split(".")[0])
-    except ImportError:
+        module = import_extension(path, module_file.split(".")[0])
+    except Exception:  # noqa: BLE001 - any failure is damage, which the builder repairs
         return None
+    problem = identity_problem(module, expected)
+    if problem is not None:
+        discard_damaged(path, problem)
+        return None
+    return module
+
+
+def identity_problem(module, expected_key: str) -> str | None:
+    """Why `module` is not the module of `expected_key` (its own KEY, checked after import),
+    or None when it is."""
+    key = getattr(module, "KEY", None)
+    if key == expected_key:
+        return None
+    shown = key[:12] if isinstance(key, str) else "none"
+    return (f"is not the module its cache entry names (its key {shown}, expected "
+            f"{expected_key[:12]}: another model's or another build's)")
+
+
+def discard_damaged(path: Path, problem: str) -> None:
+    """Warn (CacheWarning) that a cached module is damaged, and discard its entry so that
+    the next build replaces it."""
+    from ..errors import warn_user
+
+    warn_user(f"gagen: the cached module {path} {problem}; rebuilding it", CacheWarning)
+    forget_module(path)
+    discard_cache_entry(path.parent)
 
 
 def index_record(cache: Path, key: str, module) -> None:
@@ -199,7 +244,8 @@ def index_record(cache: Path, key: str, module) -> None:
     if name.startswith("gagen.shipped."):
         record = {"shipped": name.rsplit(".", 1)[1]}
     elif path.parent.parent.resolve() == cache.resolve():
-        record = {"entry": path.parent.name, "module": path.name}
+        record = {"entry": path.parent.name, "module": path.name,
+                  "key": str(getattr(module, "KEY", ""))}
     else:
         return
     try:
@@ -326,9 +372,14 @@ def usable_cache_dir(cache: Path) -> Path:
         reason = exc.strerror or type(exc).__name__
     if _fallback_cache is None:
         _fallback_cache = Path(tempfile.mkdtemp(prefix="gagen-cache-"))
-    warnings.warn(f"gagen: cannot write the cache folder {cache} ({reason}); building in "
-                  f"{_fallback_cache} for this process instead. Set GAGEN_CACHE_DIR or "
-                  "cache_dir= to a writable folder to keep builds.", CacheWarning, stacklevel=4)
+        # the process's private cache goes with the process (its modules stay mapped)
+        atexit.register(shutil.rmtree, _fallback_cache, ignore_errors=True)
+    from ..errors import warn_user
+
+    warn_user(f"gagen: cannot write the cache folder {cache} ({reason}); building in "
+              f"{_fallback_cache} for this process instead (removed when it ends). Set "
+              "GAGEN_CACHE_DIR or cache_dir= to a writable folder to keep builds.",
+              CacheWarning)
     return _fallback_cache
 
 
@@ -356,7 +407,9 @@ def install_received_module(cache: Path, file_name: str, data: bytes, sha256: st
     try:
         (tmp / file_name).write_bytes(data)
         (tmp / _CHECKSUM_FILE).write_text(_checksum(tmp / file_name))
-        if entry.exists():  # damaged: set aside, then replaced
+        # damaged: set aside, then replaced; but another worker process of this machine may
+        # have just installed an intact copy, which it is importing: that one stays
+        if entry.exists() and not cached_module_is_intact(entry, file_name):
             discard_cache_entry(entry)
         os.rename(tmp, entry)
     except OSError:
@@ -368,13 +421,40 @@ def install_received_module(cache: Path, file_name: str, data: bytes, sha256: st
 
 
 def import_extension(path: Path, module_name: str):
+    """The extension module at `path`, imported once per process. A path whose earlier
+    module was discarded as damaged (`forget_module`) is imported from a private copy: the
+    dynamic loader and Python would otherwise return the old module for it. An import that
+    fails marks the path the same way (the loader may keep the library it opened)."""
     key = str(path.resolve())
     module = _loaded_modules.get(key)
-    if module is None:
-        spec = importlib.util.spec_from_file_location(module_name, path)
+    if module is not None:
+        return module
+    copy = None
+    try:
+        source = path
+        if key in _stale_paths:
+            copy = Path(tempfile.mkdtemp(prefix="gagen-reload-"))
+            source = copy / path.name
+            shutil.copyfile(path, source)
+        spec = importlib.util.spec_from_file_location(module_name, source)
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
-        _loaded_modules[key] = module
+    except BaseException:
+        _stale_paths.add(key)
+        raise
+    finally:
+        if copy is not None:  # a loaded library needs no file on disk
+            shutil.rmtree(copy, ignore_errors=True)
+    _loaded_modules[key] = module
+    _stale_paths.discard(key)
     return module
+
+
+def forget_module(path: Path) -> None:
+    """This process's import of the module at `path` is no longer to be used (its entry is
+    being discarded); a later import there loads the new file (import_extension)."""
+    key = str(Path(path).resolve())
+    _loaded_modules.pop(key, None)
+    _stale_paths.add(key)
 
 

@@ -20,7 +20,8 @@ from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE, precedence
 
 from .. import __version__
-from ..manifest import FRICTION_WIDTH, QUATERNION_RESTORING, ModelInfo
+from ..manifest import FRICTION_WIDTH, JOINT_KINDS, QUATERNION_RESTORING, ModelInfo
+from ..symbolic.centroidal import centroidal_program
 from ..symbolic.differentiate import needed_definitions
 from ..symbolic.frames import OFFSET_SIZE, TRANSFORM_SIZE, add_frame_kinematics
 from ..symbolic.gibbs_appell import Equations
@@ -41,7 +42,7 @@ COPIED_FILES = ("integrator.c", "integrator.h", "gagen_ode.h", "gagen_second_ord
                 "gagen_math.h", "gagen_api.h")
 # the C files of a model, all compiled into its module (plain C, usable without Python)
 MODEL_C_FILES = ("mass_matrix.c", "rhs.c", "simulation.c", "inverse_dynamics.c", "frames.c",
-                 "regressor.c", "integrator.c")
+                 "regressor.c", "centroidal.c", "integrator.c")
 # the module's one file that speaks to Python: the kernels' table for gagen's runtime
 MODULE_FILE = "module.c"
 _C_KEYWORDS = frozenset({
@@ -734,6 +735,41 @@ def _regressor_blocks(eqs: Equations, kernels: _Kernels, config: CodegenConfig,
     return blocks
 
 
+# the arrays of the centroidal kernels (their own CSE and printer, as the regressor's): X is
+# the placements, which they read instead of placing the bodies again
+CENTROIDAL_ARRAYS = {"center_of_mass": ("X", "q", "p", "com"),
+                     "centroidal_map": ("X", "q", "p", "Ag"), "robot_mass": ("p", "m")}
+
+
+def _centroidal_blocks(eqs: Equations, kernels: _Kernels, config: CodegenConfig
+                       ) -> dict[str, CodeBlock]:
+    """The centre of mass, A_g and the robot's mass as straight-line code
+    (symbolic/centroidal.py) reading the bodies' placements from X, from a CSE of their own
+    as the regressor's: the dynamics' kernels stay as they are. Their segment functions, if
+    any, join `kernels`'."""
+    program = centroidal_program(eqs)
+    outputs = {"center_of_mass": program.center_of_mass,
+               "centroidal_map": program.centroidal_map,
+               "robot_mass": [program.mass]}
+    cse = CSEResult(eqs, kernels.cse.eliminated, program.intermediates, outputs)
+    names = _symbol_names(eqs, cse)
+    names.update({symbol: f"x{k}" for symbol, k in program.placements.items()})
+    printer = GagenCPrinter(names, list(eqs.coords.q), config.fast_trig)
+    own = _Kernels(kernels.ident, cse, printer, config, arrays=CENTROIDAL_ARRAYS, looped=())
+    targets = {"center_of_mass": [f"com[{k}]" for k in range(3)],
+               "centroidal_map": [f"Ag[{k}]" for k in range(6 * eqs.n)],
+               "robot_mass": ["m[0]"]}
+    blocks = {}
+    for name, exprs in cse.outputs.items():
+        needed = cse.needed(exprs)
+        used = set().union(*(a.expr.free_symbols for a in needed),
+                           *(e.free_symbols for e in exprs))
+        reads = {s: f"X[{k}]" for s, k in program.placements.items() if s in used}
+        blocks[name] = own.block(name, exprs, targets[name], externals=reads)
+    kernels.segments.extend(own.segments)
+    return blocks
+
+
 def model_context(eqs: Equations) -> dict:
     """What every template says about the model: its identifier, sizes, and the names of
     its coordinates and parameters with the defaults."""
@@ -789,6 +825,7 @@ def generate(eqs: Equations, module_name: str, key: str,
         "frame_offsets": kernels.block("frame_offsets", out["frame_offsets"],
                                        [f"F[{k}]" for k in range(len(out["frame_offsets"]))]),
         **_regressor_blocks(eqs, kernels, config, reg, reg_parameters),
+        **_centroidal_blocks(eqs, kernels, config),
     }
     # per body and per frame, the code of one alone: a frame's kinematics then places its
     # path to the world, not every body and every frame
@@ -815,6 +852,9 @@ def generate(eqs: Equations, module_name: str, key: str,
         "tree": info.bodies,
         "frame_bodies": [body for _, body, _ in info.frames],
         "frame_names": [c_identifier(name) for name, _, _ in info.frames],
+        # the moving bodies for centroidal.c: (body, moving parent, kind, first coordinate)
+        "centroidal": info.moving_tree,
+        "dof_parents": dof_parents(info.bodies, n),
         "ldlt": ldlt_plan(n, zero),
         "zero_fill": zero_fill,
         "blocks": blocks,
@@ -836,6 +876,7 @@ def generate(eqs: Equations, module_name: str, key: str,
         "inverse_dynamics.c": env.get_template("model/inverse_dynamics.c.j2").render(context),
         "frames.c": env.get_template("model/frames.c.j2").render(context),
         "regressor.c": env.get_template("model/regressor.c.j2").render(context),
+        "centroidal.c": env.get_template("model/centroidal.c.j2").render(context),
         MODULE_FILE: env.get_template("model/module.c.j2").render(context),
     }
     kernels_template = env.get_template("model/kernels.c.j2")
@@ -846,6 +887,22 @@ def generate(eqs: Equations, module_name: str, key: str,
         files[name] = f"/* {context['header']} (copied from gagen's templates) */\n" + text
     return GeneratedCode(files=files, ops_before=cse.ops_before, ops_after=cse.ops_after,
                          cse_seconds=cse.seconds, module_name=module_name, ident=ident)
+
+
+def dof_parents(bodies, n: int) -> list[int]:
+    """Per velocity coordinate, the one before it on its path to the world (-1: none), from
+    the tree (parent, joint kind, first coordinate) per body: Featherstone's λ, the sparsity
+    of M that the task-space factorisation M = Lᵀ D L keeps."""
+    sizes = {JOINT_KINDS["fixed"]: 0, JOINT_KINDS["floating"]: 6}
+    last: list[int] = []  # per body, the last coordinate on its path (-1: none)
+    out = [-1] * n
+    for parent, kind, column in bodies:
+        before = last[parent] if parent >= 0 else -1
+        size = sizes.get(kind, 1)
+        for k in range(size):
+            out[column + k] = before if k == 0 else column + k - 1
+        last.append(column + size - 1 if size else before)
+    return out
 
 
 def zero_fills_mass_matrix(n: int, zeros: int) -> bool:

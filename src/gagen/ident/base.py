@@ -14,8 +14,12 @@ seed, so the result is reproducible), stacked into W, each
 column scaled to unit norm. Then
 
 - rank: QR with column pivoting (scipy.linalg.qr); r = the number of |R_jj| above
-  `TOLERANCE` * |R_00|. Random states give independent columns a distance from the others'
-  span of 1e-4 or more, dependent ones of 1e-14 or less, so the choice is clear-cut;
+  `TOLERANCE` * |R_00|, TOLERANCE = 1e-8. On unit-norm columns |R_jj| is about a column's
+  distance from the span of the columns before it. Random states give independent columns
+  a distance from the others' span of 1e-4 or more, dependent ones of 1e-14 or less, so the
+  choice is clear-cut; at the edge, a weakly excited column 1e-6 from the others' span (the
+  kept columns' smallest singular value about 1e-6 of their largest) is still a base
+  parameter, and one 1e-12 from it is dependent (tests/test_identification.py);
 - which columns: in the regressor's order (QR without pivoting, |R_jj| > TOLERANCE), so a
   parameter is grouped into earlier ones: a body's into its ancestors', Iyy into Ixx and
   Izz, an armature into its body's inertia. If that order does not give r columns, the

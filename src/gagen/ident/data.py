@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..csvtext import read_name
+
 DEFAULT_WINDOW = 0.05  # seconds
 DEFAULT_POLYORDER = 4
 
@@ -94,28 +96,60 @@ def estimate_derivatives(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None,
 
 
 def _read_csv(path: Path) -> tuple[list[str], np.ndarray]:
-    with path.open(newline="") as fh:
-        reader = csv.reader(fh)
-        try:
-            header = [name.strip() for name in next(reader)]
-        except StopIteration:
-            raise ValueError(f"{path}: empty file") from None
-        values = []
-        for line, row in enumerate(reader, start=2):
-            if not row:
-                continue
-            if len(row) != len(header):
-                raise ValueError(f"{path}: line {line} has {len(row)} values, the header "
-                                 f"{len(header)}")
-            try:
-                values.append([float(v) for v in row])
-            except ValueError:
-                raise ValueError(f"{path}: line {line} holds a value that is not a "
-                                 "number") from None
+    """The header (names as gagen wrote them: gagen.csvtext) and the numbers of a CSV file
+    of UTF-8 text; ValueError naming the file (and the line) for anything else."""
+    try:
+        with path.open("rb") as fh:
+            reader = csv.reader(_text_lines(fh, path))
+            header = _header(next(reader, None), path)
+            values = []
+            for row in reader:
+                if not row:
+                    continue
+                line = reader.line_num
+                if len(row) != len(header):
+                    raise ValueError(f"{path}: line {line} has {len(row)} values, the header "
+                                     f"{len(header)}")
+                try:
+                    values.append([float(v) for v in row])
+                except ValueError:
+                    raise ValueError(f"{path}: line {line} holds a value that is not a "
+                                     "number") from None
+    except csv.Error as exc:
+        raise ValueError(f"{path}: line {reader.line_num}: not readable as CSV ({exc})") from None
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if not values:
+        raise ValueError(f"{path}: has a header and no rows of data")
     data = np.array(values, dtype=float).reshape(-1, len(header))
     if not np.isfinite(data).all():
         raise ValueError(f"{path}: holds NaN or inf")
     return header, data
+
+
+def _text_lines(fh, path: Path):
+    """The lines of a binary file as UTF-8 text (a byte-order mark allowed first);
+    ValueError naming the line of bytes that are not UTF-8."""
+    for number, raw in enumerate(fh, start=1):
+        try:
+            yield raw.decode("utf-8-sig" if number == 1 else "utf-8")
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"{path}: line {number}: byte 0x{raw[exc.start]:02x} at column "
+                             f"{exc.start + 1} is not UTF-8 text") from None
+
+
+def _header(row: list[str] | None, path: Path) -> list[str]:
+    """The column names of a header row; ValueError for none, or a name given twice."""
+    if not row:
+        raise ValueError(f"{path}: empty file (expected a header: t, the coordinates, ...)")
+    header = [read_name(name.strip()) for name in row]
+    seen: dict[str, int] = {}
+    for k, name in enumerate(header, start=1):
+        if name in seen:
+            raise ValueError(f"{path}: column {name!r} appears twice (columns {seen[name]} "
+                             f"and {k}); which one holds the data is ambiguous")
+        seen[name] = k
+    return header
 
 
 def _uniform_step(t: np.ndarray) -> float:

@@ -103,8 +103,11 @@ class IdentificationResult:
         return path
 
     def to_csv(self, path) -> Path:
-        """One row per base parameter: name, value, std, relative std (%), expression."""
+        """One row per base parameter: name, value, std, relative std (%), expression (text
+        cells escaped as spreadsheets expect: gagen.csvtext)."""
         import csv
+
+        from ..csvtext import text_cell
 
         path = Path(path)
         with path.open("w", newline="") as fh:
@@ -112,8 +115,8 @@ class IdentificationResult:
             writer.writerow(["name", "value", "std", "relative_std_percent", "expression"])
             for row in zip(self.names, self.values, self.std, self.relative_std,
                            self.expressions):
-                writer.writerow([row[0], repr(float(row[1])), repr(float(row[2])),
-                                 f"{float(row[3]):.4g}", row[4]])
+                writer.writerow([text_cell(row[0]), repr(float(row[1])), repr(float(row[2])),
+                                 f"{float(row[3]):.4g}", text_cell(row[4])])
         return path
 
     def summary(self, digits: int = 6) -> str:

@@ -5,11 +5,14 @@ classes, `<include>`, `<frame>`, quat/euler/axisangle/xyaxes orientations, diagi
 fullinertia, inertias from geoms), after `mjcf_files.scan_mjcf` has checked every file it
 will read. Bodies, joints, inertias and gravity are then read from the compiled `MjModel`:
 
-- gagen's frames are joint frames. A MuJoCo joint sits at `jnt_pos` inside its body with
-  `jnt_axis` in the body's axes, so each joint's gagen frame is the MuJoCo body frame moved
-  to the joint's anchor. A body with several joints becomes a chain of massless bodies
-  named `<body>_<joint>`, the last one (with the mass) named after the body; a body
-  without a joint is welded to its parent (a fixed joint, merged away by `merge.py`).
+- gagen's bodies are placed by joint frames. A MuJoCo joint sits at `jnt_pos` inside its
+  body with `jnt_axis` in the body's axes, so each joint's gagen frame is the MuJoCo body
+  frame moved to the joint's anchor. A body with several joints becomes a chain of
+  massless bodies named `<body>_<joint>`, the last one (with the mass) named after the
+  body; a body without a joint is welded to its parent (a fixed joint, merged away by
+  `merge.py`). The frame named after a MuJoCo body is MuJoCo's body frame (`xpos`,
+  `xmat`) wherever its joints are anchored: where the last anchor is away from the body's
+  origin, an extra frame places it (`Model.frames`); the joint's frame is at its anchor.
 - The coordinates are MuJoCo's `qpos` for hinge and slide joints: a joint's `ref` is
   folded into the joint's origin, so q = 0 is not the pose drawn in the file when
   ref != 0, exactly as in MuJoCo.
@@ -25,7 +28,6 @@ loss and armature are returned by `joint_terms`.
 
 from __future__ import annotations
 
-import warnings
 from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
@@ -33,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import sympy as sp
 
-from ..errors import ModelError, one_line
+from ..errors import ModelError, one_line, warn_user
 from .inputs import MAX_BODIES, name_field, quote
 from .merge import merge_fixed_joints, symmetric
 from .mjcf_files import scan_mjcf
@@ -42,11 +44,13 @@ from .model import (
     WORLD,
     ZERO3,
     Body,
+    Frame,
     Joint,
     Limits,
     Model,
     check_inertia,
     exact_units,
+    round_off_floor,
     vector,
 )
 from .parameters import parameterize_joint_terms, parameterize_mass_properties
@@ -74,11 +78,13 @@ def compile_mjcf(path: str | Path):
     try:
         with _warnings_collected(mujoco, notes):
             mj = mujoco.MjModel.from_xml_path(source)
-    except (ValueError, RuntimeError, mujoco.FatalError) as exc:
-        raise ModelError(source, "MuJoCo's compiler", _shortened(str(exc))) from None
+    except MemoryError:
+        raise ModelError(source, "MuJoCo's compiler", "ran out of memory compiling the "
+                         "model") from None
+    except Exception as exc:  # noqa: BLE001 - every error of MuJoCo's is the file's
+        raise ModelError(source, "MuJoCo's compiler", _compile_error(exc)) from None
     for note in notes:
-        warnings.warn(one_line(f"{source}: MuJoCo's compiler: {_shortened(note)}"),
-                      stacklevel=2)
+        warn_user(one_line(f"{source}: MuJoCo's compiler: {_shortened(note)}"), UserWarning)
     if mj.nbody - 1 > MAX_BODIES:
         raise ModelError(source, "<worldbody>", f"{mj.nbody - 1} bodies; gagen builds robots "
                          f"of at most {MAX_BODIES} bodies")
@@ -95,6 +101,16 @@ def _warnings_collected(mujoco, into: list[str]):
         yield
     finally:
         mujoco.set_mju_user_warning(previous)
+
+
+def _compile_error(exc: Exception) -> str:
+    """MuJoCo's message, or what its bindings say when the C++ threw something they do not
+    translate (pybind11's "Caught an unknown exception!", an allocation that failed)."""
+    text = _shortened(str(exc))
+    if not text or "unknown exception" in text.lower():
+        return (f"failed without saying why ({type(exc).__name__}: {text or 'no message'}; "
+                "often memory running out)")
+    return text
 
 
 def _shortened(message: str) -> str:
@@ -117,17 +133,21 @@ def model_from_mjmodel(mj, source: str = "<mjcf>", strict: bool = False) -> Mode
     bodies: list[Body] = []
     # Per MuJoCo body: (the gagen body that carries it, the anchor of its last joint).
     tips: dict[int, tuple[str, np.ndarray]] = {0: (WORLD, np.zeros(3))}
+    frames: list[Frame] = []
     for b in range(1, mj.nbody):  # MuJoCo orders bodies parents first
         chain, anchor = _body_chain(mj, b, names, tips[int(mj.body_parentid[b])], source)
         bodies.extend(chain[:-1])
         bodies.append(_with_mass(chain[-1], mj, b, anchor, source, strict))
         tips[b] = (chain[-1].name, anchor)
+        if np.any(anchor):
+            frames.append(_body_frame(chain[-1].name, anchor))
     if not any(body.joint.moves for body in bodies):
         raise ModelError(source, "<worldbody>", "no hinge or slide joint: nothing can move")
     g, direction = _gravity(mj)
     bodies = _with_joint_terms(bodies, joint_terms(mj, source))
     model = Model(name=names.model, bodies=tuple(bodies), parameters={"g": g},
-                  gravity=vector([-sp.Symbol("g") * d for d in direction]), source=source)
+                  gravity=vector([-sp.Symbol("g") * d for d in direction]), source=source,
+                  extra_frames=tuple(frames))
     return parameterize_joint_terms(parameterize_mass_properties(merge_fixed_joints(model)))
 
 
@@ -159,6 +179,13 @@ def joint_terms(mj, source: str = "<mjcf>") -> dict[str, dict[str, float]]:
 
 
 # --- names ----------------------------------------------------------------------------------
+
+def body_names(mj, source: str = "<mjcf>") -> list[str]:
+    """The names of MuJoCo's bodies 1, 2, ... in gagen's model of `mj`: each names the frame
+    that is MuJoCo's body frame (`xpos`, `xmat`)."""
+    names = _Names(mj, source)
+    return [names.body(b) for b in range(1, mj.nbody)]
+
 
 class _Names:
     """Stable names of a compiled model's bodies and joints: MuJoCo's, else `body<id>`,
@@ -252,6 +279,13 @@ def _body_chain(mj, b: int, names: _Names, parent: tuple[str, np.ndarray],
     return chain, anchor
 
 
+def _body_frame(name: str, anchor: np.ndarray) -> Frame:
+    """MuJoCo's frame of a body (`xpos`, `xmat`) in the gagen body that carries it, whose
+    frame is at the last joint's anchor with the body's axes (`Model.frames`: it places the
+    body's own frame)."""
+    return Frame(name, name, xyz=_vector(-np.asarray(anchor, dtype=float)))
+
+
 def _refuse_unsupported(mj, j: int, body: str, names: _Names, source: str) -> None:
     """Ball joints, and a free joint after another joint: the one place that knows which
     MuJoCo joints gagen cannot model."""
@@ -289,8 +323,10 @@ def _with_mass(body: Body, mj, b: int, anchor: np.ndarray, source: str, strict: 
     principal = _quat_matrix(mj.body_iquat[b])
     inertia = principal @ np.diag(np.asarray(mj.body_inertia[b], dtype=float)) @ principal.T
     inertia = (inertia + inertia.T) / 2
-    check_inertia(inertia, source, f"body {quote(body.name)}, inertia", strict)
-    com = np.asarray(mj.body_ipos[b], dtype=float) - anchor
+    ipos = np.asarray(mj.body_ipos[b], dtype=float)
+    check_inertia(inertia, source, f"body {quote(body.name)}, inertia", strict,
+                  floor=round_off_floor(float(mj.body_mass[b]), float(np.linalg.norm(ipos))))
+    com = ipos - anchor
     return Body(name=body.name, parent=body.parent, joint=body.joint,
                 mass=_number(mj.body_mass[b]), com=_vector(com),
                 inertia=symmetric(sp.Matrix(3, 3, [_number(v) for v in inertia.ravel()])))
@@ -299,7 +335,8 @@ def _with_mass(body: Body, mj, b: int, anchor: np.ndarray, source: str, strict: 
 def _gravity(mj) -> tuple[float, list[sp.Expr]]:
     """(g, unit direction of gravity): gravity is -g times the negated direction."""
     gravity = np.asarray(mj.opt.gravity, dtype=float)
-    g = float(np.linalg.norm(gravity))
+    scale = float(np.abs(gravity).max())
+    g = scale * float(np.linalg.norm(gravity / scale)) if scale > 0 else 0.0  # no overflow
     if g == 0.0 or int(mj.opt.disableflags) & _GRAVITY_DISABLED:
         return 0.0, [sp.Integer(0), sp.Integer(0), sp.Integer(1)]
     return g, exact_units(-gravity / g)

@@ -2,16 +2,22 @@
 
 An MJCF file may come from anyone, and MuJoCo's compiler opens whatever its `<include
 file>` and asset paths (`<mesh file>`, `<texture file>`, `<hfield file>`, ...) name, and
-allocates what some attributes ask for. So gagen reads the XML itself first, with expat and
-no DTD (as for URDF), follows the includes, and refuses:
+allocates what some attributes and some files ask for. So gagen reads the XML itself
+first, with expat and no DTD (as for URDF), follows the includes, and refuses:
 
 - a path that is absolute, climbs with `..`, or resolves (through a symbolic link) outside
   the model file's folder; a file that is missing or too large;
 - more bodies than gagen builds (`inputs.MAX_BODIES`, counting `<replicate>` copies);
 - elements gagen does not model and that make MuJoCo generate or load content:
   deformables (`composite`, `flexcomp`, `flex`), model composition (`attach`, `model`),
-  plugins (`extension`, `plugin`), builtin meshes; and allocation sizes beyond
-  `MAX_ALLOCATION` (height fields, textures, custom numerics, user data).
+  plugins (`extension`, `plugin`), builtin meshes;
+- what would cost MuJoCo more than the bounds below (`BOUNDS`): they count what MuJoCo
+  will build and allocate, not what the file says about itself. `<replicate>` counts
+  every element it copies (nested ones multiply); an image (a texture's file or files, a
+  height field's file) counts the pixels it decodes to, read from the image's own header
+  (a PNG's IHDR, a custom height field's two integers) before MuJoCo decodes anything; a
+  builtin cube or skybox texture counts its six faces of width x width (MuJoCo ignores
+  its height).
 
 MuJoCo then compiles the file from its path (`MjModel.from_xml_path`), with its own rules
 for where included files and assets are found. MuJoCo's virtual file system is not used:
@@ -24,6 +30,7 @@ than this scan does. The bytes of every file found here are part of the cache's 
 from __future__ import annotations
 
 import os
+import struct
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from importlib import metadata
@@ -32,11 +39,29 @@ from pathlib import Path, PurePath
 from ..errors import ModelError
 from .inputs import MAX_BODIES, MAX_FILE_BYTES, parse_untrusted_xml, quote, read_description
 
-MAX_INCLUDES = 200
-MAX_ASSETS = 2000
-MAX_ASSET_BYTES = 256 * 2**20  # meshes of a real robot are a few MB each
-MAX_ALLOCATION = 2**24  # entries one element may make MuJoCo allocate
-MAX_REPLICATE = 10_000
+# The bounds on what an MJCF model may cost MuJoCo, in one place (the README's safety
+# section lists them, with the tests that guard each: tests/test_mjcf.py,
+# tests/test_hostile_input_round3.py).
+MAX_INCLUDES = 200  # included files
+MAX_ASSETS = 2000  # asset files
+MAX_ASSET_BYTES = 256 * 2**20  # bytes of every asset file together (meshes: a few MB each)
+MAX_ALLOCATION = 2**24  # entries one element's attributes may make MuJoCo allocate
+MAX_REPLICATE = 10_000  # copies made by <replicate> (nested ones: their product)
+# Elements MuJoCo builds, each counted once per copy a <replicate> makes of it: MuJoCo's
+# compiler takes ~3 s for 20,000 geoms and its time grows faster than the count (80,000
+# replicated sites: minutes); a robot has hundreds.
+MAX_ELEMENTS = 20_000
+# Decoded pixels of one image (a texture's faces together, a height field): 4096 x 4096.
+# MuJoCo peaks at 9-15 bytes a pixel while it decodes a PNG (lodepng's buffers, then its
+# own), so one such image is 150-250 MB.
+MAX_IMAGE_PIXELS = 2**24
+MAX_TOTAL_PIXELS = 2**25  # decoded pixels of all of a model's images together
+BOUNDS = {"included files": MAX_INCLUDES, "asset files": MAX_ASSETS,
+          "bytes of assets": MAX_ASSET_BYTES, "entries per element": MAX_ALLOCATION,
+          "replicate copies": MAX_REPLICATE, "elements": MAX_ELEMENTS,
+          "pixels per image": MAX_IMAGE_PIXELS, "pixels of all images": MAX_TOTAL_PIXELS}
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_KTX_SIGNATURES = (b"\xabKTX 11\xbb\r\n\x1a\n", b"\xabKTX 20\xbb\r\n\x1a\n")
 
 # Elements gagen refuses, with the reason.
 _REFUSED = {
@@ -54,6 +79,7 @@ _ALLOCATING = {
     "texture": ("width", "height"),
     "numeric": ("size",),
 }
+_IMAGES = ("texture", "hfield")  # elements whose files MuJoCo decodes as images
 # Asset elements and the <compiler> folder they are looked up in (assetdir otherwise).
 _ASSET_DIRS = {"mesh": "meshdir", "skin": "meshdir", "hfield": "meshdir",
                "texture": "texturedir"}
@@ -68,10 +94,23 @@ class MjcfFiles:
     includes: list[Path] = field(default_factory=list)
     assets: list[Path] = field(default_factory=list)
     body_count: int = 0
+    element_count: int = 0  # each element once per copy <replicate> makes of it
+    pixels: int = 0  # decoded pixels of every image (texture, height field) together
 
     @property
     def folder(self) -> Path:
         return self.main.parent
+
+
+@dataclass
+class _Image:
+    """A texture or height field: what MuJoCo decodes for it, counted once its files are
+    found (`_check_images`)."""
+
+    element: ET.Element
+    where: str
+    copies: int
+    files: list[tuple[Path, str]] = field(default_factory=list)  # (path, what names it)
 
 
 @dataclass
@@ -80,7 +119,9 @@ class _Scan:
     source: str
     root: Path  # the real path of the model's folder
     compiler: dict[str, str] = field(default_factory=dict)
-    asset_refs: list[tuple[str, str, Path, str]] = field(default_factory=list)
+    # (tag, value, including folder, what names it, the image it belongs to)
+    asset_refs: list[tuple[str, str, Path, str, _Image | None]] = field(default_factory=list)
+    images: list[_Image] = field(default_factory=list)
     xml_bytes: int = 0
 
 
@@ -97,9 +138,13 @@ def scan_mjcf(path: str | Path) -> MjcfFiles:
     root = parse_untrusted_xml(data, source, "an MJCF file")
     _check_root(root, source, source)
     _walk(root, scan, path.parent, 1, source)
-    for tag, value, including_dir, element in scan.asset_refs:
-        scan.files.assets.append(_asset_path(scan, tag, value, including_dir, element))
+    for tag, value, including_dir, element, image in scan.asset_refs:
+        path = _asset_path(scan, tag, value, including_dir, element)
+        scan.files.assets.append(path)
+        if image is not None:
+            image.files.append((path, element))
     _check_asset_sizes(scan)
+    _check_images(scan)
     return scan.files
 
 
@@ -136,7 +181,16 @@ def _walk(element: ET.Element, scan: _Scan, including_dir: Path, copies: int,
         where = f"<{quote(tag)[1:-1]}> in {file}"
         if tag in _REFUSED:
             raise ModelError(scan.source, where, _REFUSED[tag])
+        scan.files.element_count += copies
+        if scan.files.element_count > MAX_ELEMENTS:
+            raise ModelError(scan.source, where, f"more than {MAX_ELEMENTS:,} elements "
+                             "(counting each copy <replicate> makes); MuJoCo's compiler "
+                             "would take minutes")
         _check_allocation(elem, tag, scan.source, where)
+        image = None
+        if tag in _IMAGES:
+            image = _Image(elem, where, copies)
+            scan.images.append(image)
         if tag == "body":
             scan.files.body_count += copies
             if scan.files.body_count > MAX_BODIES:
@@ -156,7 +210,7 @@ def _walk(element: ET.Element, scan: _Scan, including_dir: Path, copies: int,
             _include(elem, scan, including_dir, copies, where)
         for key, value in elem.attrib.items():
             if key.startswith("file") and tag != "include":
-                scan.asset_refs.append((tag, value, including_dir, f"{where}, {key}"))
+                scan.asset_refs.append((tag, value, including_dir, f"{where}, {key}", image))
         stack.extend((child, copies) for child in reversed(list(elem)))
 
 
@@ -267,3 +321,76 @@ def _check_asset_sizes(scan: _Scan) -> None:
         if total > MAX_ASSET_BYTES:
             raise ModelError(scan.source, "<asset>", f"the asset files have more than "
                              f"{MAX_ASSET_BYTES:,} bytes")
+
+
+# --- images: what MuJoCo decodes, from each image's own header --------------------------
+
+def _check_images(scan: _Scan) -> None:
+    """Refuse an image that decodes to more than MAX_IMAGE_PIXELS, or images that together
+    decode to more than MAX_TOTAL_PIXELS (each counted once per element that loads it)."""
+    for image in scan.images:
+        pixels = _image_pixels(image, scan.source)
+        if pixels > MAX_IMAGE_PIXELS:
+            raise ModelError(scan.source, image.where, f"decodes to {pixels:,} pixels; gagen "
+                             f"reads images of at most {MAX_IMAGE_PIXELS:,} pixels (4096 x "
+                             "4096)")
+        scan.files.pixels += pixels * image.copies
+        if scan.files.pixels > MAX_TOTAL_PIXELS:
+            raise ModelError(scan.source, image.where, f"the model's images decode to more "
+                             f"than {MAX_TOTAL_PIXELS:,} pixels together")
+
+
+def _image_pixels(image: _Image, source: str) -> int:
+    """The pixels MuJoCo decodes for a texture or height field element: its files' (from
+    their headers), or what its attributes ask for (a builtin texture, a height field
+    without a file)."""
+    elem, tag = image.element, str(image.element.tag)
+    pixels = sum(_file_pixels(path, tag, source, where) for path, where in image.files)
+    if tag == "texture" and elem.get("builtin", "none").strip() != "none":
+        width = _count(elem, "width", MAX_ALLOCATION, source, image.where) \
+            if elem.get("width") is not None else 0
+        if elem.get("type", "cube").strip() in ("cube", "skybox"):
+            pixels += 6 * width * width  # six square faces; MuJoCo ignores the height
+        elif elem.get("height") is not None:
+            pixels += width * _count(elem, "height", MAX_ALLOCATION, source, image.where)
+    elif tag == "hfield" and not image.files:
+        pixels += _attribute_product(elem, ("nrow", "ncol"), source, image.where)
+    return pixels
+
+
+def _attribute_product(elem: ET.Element, keys: tuple[str, ...], source: str,
+                       where: str) -> int:
+    if any(elem.get(key) is None for key in keys):
+        return 0
+    product = 1
+    for key in keys:
+        product *= _count(elem, key, MAX_ALLOCATION, source, where)
+    return product
+
+
+def _file_pixels(path: Path, tag: str, source: str, where: str) -> int:
+    """The pixels an image file decodes to, from its header: a PNG's IHDR; a KTX texture
+    is kept as it is (its bytes count with the assets'); anything else as MuJoCo's custom
+    format, two 32-bit integers (rows and columns, or width and height) first."""
+    try:
+        with path.open("rb") as handle:
+            head = handle.read(33)
+    except OSError as exc:
+        raise ModelError(source, where, f"cannot read: {exc.strerror}") from None
+    if head.startswith(_PNG_SIGNATURE):
+        return _png_pixels(head, source, where)
+    if tag == "texture" and head.startswith(_KTX_SIGNATURES):
+        return 0
+    if len(head) < 8:
+        return 0  # MuJoCo refuses a file too short for the custom header
+    first, second = struct.unpack("<ii", head[:8])
+    return max(first, 0) * max(second, 0)
+
+
+def _png_pixels(head: bytes, source: str, where: str) -> int:
+    """width x height from a PNG's header chunk (IHDR: the first chunk, 13 bytes)."""
+    if len(head) < 33 or head[12:16] != b"IHDR" or struct.unpack(">I", head[8:12])[0] != 13:
+        raise ModelError(source, where, "a PNG file without its header chunk (IHDR) first; "
+                         "gagen reads the size of an image from its header")
+    width, height = struct.unpack(">II", head[16:24])
+    return width * height

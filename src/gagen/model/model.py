@@ -11,13 +11,12 @@ import contextlib
 import contextvars
 import hashlib
 import math
-import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 import sympy as sp
 
-from ..errors import InertiaWarning, ModelError, one_line
+from ..errors import InertiaWarning, ModelError, one_line, warn_user
 from ..manifest import FRICTION_WIDTH
 
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating")
@@ -44,15 +43,18 @@ def rotation_from_rpy(roll, pitch, yaw) -> sp.ImmutableMatrix:
 
 
 # A numeric angle within this of a multiple of pi/2 is that multiple (see _trig).
-QUARTER_TURN_TOLERANCE = 1e-9
+QUARTER_TURN_TOLERANCE = 1e-11
 
 
 def _trig(angle):
     """(cos, sin) of an angle; a number within QUARTER_TURN_TOLERANCE rad of a multiple of
-    pi/2 turns exactly that multiple. URDFs write pi/2 with 11 or 12 digits (Tiago's
-    1.57079632679, whose cosine is 4.9e-12): the intent is a quarter turn, and the residue
-    makes every rotation matrix dense (a quarter more operations in Tiago's mass matrix);
-    the change is an angle error below 1e-9 rad, far below what the file's digits carry."""
+    pi/2 turns exactly that multiple. URDFs write pi/2 with 11 or 12 digits (Tiago's, ANYmal's,
+    Talos's and the UR arms' 1.57079632679, 4.9e-12 short; 4.71238898038, 4.7e-12): the
+    intent is a quarter turn, and the residue makes every rotation matrix dense (a quarter
+    more operations in Tiago's mass matrix). The tolerance keeps the change far below the
+    1e-9 to which gagen matches Pinocchio: each snapped angle moves a frame by at most 1e-11
+    times its distance from the joint. Fewer digits (Kinova's 1.570796327, 2.1e-10 off; the
+    Allegro hand's 1.5707963259, 9e-10) are taken as written, as Pinocchio takes them."""
     if isinstance(angle, (int, float)) or (isinstance(angle, sp.Basic) and angle.is_Number):
         value = float(angle)
         quarters = round(value / (math.pi / 2))
@@ -258,14 +260,24 @@ class Model:
         """Every named frame: each body's own (its link, and its joint, whose frame is the
         body's: gagen's body frames are joint frames), then `extra_frames`. Names are
         unique: a joint named like a link (ANYmal C's link and joint `LF_HAA`) is listed
-        as `joint:<name>`."""
+        as `joint:<name>`.
+
+        A body's link frame is its joint frame unless `extra_frames` has a link frame named
+        like the body and fixed to it: that one places it, in the body's place in the list
+        (an MJCF body whose joints are anchored away from its origin: its frame is MuJoCo's
+        body frame, its joint frame is at the last joint's anchor)."""
         frames: dict[str, Frame] = {}
+        own = {f.name: f for f in self.extra_frames if f.kind == "link" and f.body == f.name}
         listed = [f for b in self.bodies
-                  for f in (Frame(b.name, b.name), Frame(b.joint.name, b.name, kind="joint"))]
-        for f in listed + list(self.extra_frames):
-            name = f.name
-            if name in frames and frames[name].kind != f.kind:
-                name = f"{f.kind}:{f.name}"
+                  for f in (own.get(b.name, Frame(b.name, b.name)),
+                            Frame(b.joint.name, b.name, kind="joint"))]
+        placed = {id(f) for f in own.values()}
+        entries = listed + [f for f in self.extra_frames if id(f) not in placed]
+        # links keep their names wherever a joint of the same name comes in the list (an
+        # MJCF body `tail1` whose first joint `tail1` sits on an intermediate body)
+        links = {f.name for f in entries if f.kind == "link"}
+        for f in entries:
+            name = f"{f.kind}:{f.name}" if f.kind != "link" and f.name in links else f.name
             if name not in frames:
                 frames[name] = replace(f, name=name)
         return list(frames.values())
@@ -449,7 +461,8 @@ def _validate(model: Model) -> None:
     # physical or not is the inertia of each rigid unit (a moving body and the bodies
     # welded to it), which is what enters the equations.
     for unit in rigid_units(model, values):
-        check_inertia(unit.inertia, src, unit.element(*_NAMING.get()), borderline="accept")
+        check_inertia(unit.inertia, src, unit.element(*_NAMING.get()), borderline="accept",
+                      floor=unit.floor)
     if model.has_friction and float(params[FRICTION_WIDTH]) < 0:
         raise ModelError(src, f"parameter '{FRICTION_WIDTH}'",
                          "the width of the smoothed Coulomb friction must be >= 0")
@@ -494,11 +507,12 @@ def check_model_inertias(model: Model, strict: bool = False, noun: str = "body",
     says "link 'x', inertial inertia")."""
     values = {sp.Symbol(k): sp.Float(float(v)) for k, v in model.parameters.items()}
     for unit in rigid_units(model, values):
-        check_inertia(unit.inertia, model.source, unit.element(noun, field), strict=strict)
+        check_inertia(unit.inertia, model.source, unit.element(noun, field), strict=strict,
+                      floor=unit.floor)
         if not unit.parts:
             continue  # the unit is its body: checked just now
-        for name, inertia in unit.members:
-            defect, _ = _inertia_defect(np.linalg.eigvalsh(inertia))
+        for name, inertia, floor in unit.members:
+            defect, _ = _inertia_defect(np.linalg.eigvalsh(inertia), floor)
             if defect is None:
                 continue
             element = f"{noun} '{name}', {field}"
@@ -507,10 +521,9 @@ def check_model_inertias(model: Model, strict: bool = False, noun: str = "body",
                 raise ModelError(model.source, element, f"{defect}; refused because "
                                  f"strict=True ({unit_text} has a physical combined inertia: "
                                  "load with strict=False to accept it with a warning)")
-            warnings.warn(one_line(f"{model.source}: {element}: {defect}; accepted: "
-                                   f"{unit_text} has a physical combined inertia, which is "
-                                   "what moves (strict=True refuses it)"),
-                          InertiaWarning, stacklevel=2)
+            warn_user(one_line(f"{model.source}: {element}: {defect}; accepted: "
+                               f"{unit_text} has a physical combined inertia, which is "
+                               "what moves (strict=True refuses it)"), InertiaWarning)
 
 
 # How errors about bodies name them: a URDF reader says "link 'x', inertial inertia"
@@ -532,17 +545,21 @@ def naming(noun: str, field: str):
 @dataclass(frozen=True)
 class RigidUnit:
     """A moving body and the bodies welded to it: their combined central inertia (in the
-    moving body's axes) and, for each welded part, its own central inertia."""
+    moving body's axes) and, for each welded part, its own central inertia; each with the
+    size below which a defect of it is round-off (`round_off_floor`)."""
 
     body: str
     inertia: np.ndarray
-    parts: tuple[tuple[str, np.ndarray], ...]
+    parts: tuple[tuple[str, np.ndarray, float], ...]  # (name, own inertia, floor)
     own: np.ndarray  # the moving body's own central inertia
+    floor: float = 0.0  # of the combined inertia
+    own_floor: float = 0.0
 
     @property
-    def members(self) -> tuple[tuple[str, np.ndarray], ...]:
-        """Every body of the unit with its own central inertia, the moving one first."""
-        return ((self.body, self.own), *self.parts)
+    def members(self) -> tuple[tuple[str, np.ndarray, float], ...]:
+        """Every body of the unit with its own central inertia and its round-off floor, the
+        moving one first."""
+        return ((self.body, self.own, self.own_floor), *self.parts)
 
     def element(self, noun: str = "body", field: str = "inertia") -> str:
         """How an error names the unit: `body 'x' (with 2 welded bodies), inertia`."""
@@ -571,20 +588,25 @@ def rigid_units(model: Model, values: dict[sp.Symbol, float]) -> list[RigidUnit]
             members[unit].append((b, R @ R0, d + R @ d0))
     units = []
     for name, parts in members.items():
-        mass, first, inertia, own = 0.0, np.zeros(3), np.zeros((3, 3)), []
+        mass, first, inertia, own, reach = 0.0, np.zeros(3), np.zeros((3, 3)), [], 0.0
         for b, R, d in parts:
             where = f"body '{b.name}'"
             m = _numeric(b.mass, values, model.source, f"{where}, mass")
-            c = d + R @ _numeric_matrix(b.com, values, model.source, f"{where}, com").ravel()
+            com = _numeric_matrix(b.com, values, model.source, f"{where}, com").ravel()
+            c = d + R @ com
             I_c = R @ _inertia_value(b, values, model.source) @ R.T
             mass, first = mass + m, first + m * c
             inertia += I_c + m * (c @ c * np.eye(3) - np.outer(c, c))
-            if b.name != name:
-                own.append((b.name, _inertia_value(b, values, model.source)))
+            reach = max(reach, float(np.linalg.norm(c)))
+            own.append((b.name, _inertia_value(b, values, model.source),
+                        round_off_floor(m, float(np.linalg.norm(com)))))
         centre = first / mass if mass > 0 else np.zeros(3)
         central = inertia - mass * (centre @ centre * np.eye(3) - np.outer(centre, centre))
-        units.append(RigidUnit(name, (central + central.T) / 2, tuple(own),
-                               _inertia_value(parts[0][0], values, model.source)))
+        # the combined inertia sums the parts' m c c^T about the body's origin: its
+        # round-off scales with the farthest mass centre
+        (_, own_inertia, own_floor), *welded = own
+        units.append(RigidUnit(name, (central + central.T) / 2, tuple(welded), own_inertia,
+                               round_off_floor(mass, reach), own_floor))
     return units
 
 
@@ -605,11 +627,25 @@ INERTIA_TRIANGLE_TOLERANCE = 0.25
 INERTIA_DEFINITE_TOLERANCE = 1e-2
 # Below this (relative) no defect is reported at all: floating-point rounding of R I R^T.
 _ROUNDING = 1e-9
+# Round-off around a zero inertia: a point mass has a largest principal moment of zero,
+# so no defect is small relative to it, yet exporters write such inertias with
+# round-off (example-robot-data's icub: ixx = iyy = -5.4e-20, izz = 0, on a 0.53 kg link
+# whose mass centre is 3 cm from its frame; 5.4e-20 = 2^-64 is the largest rounding error
+# of a number near m |c|^2 = 4.9e-4). A defect is also round-off when it is below _ROUNDING
+# of m l^2, the moment of the body's mass at the distance l of its mass centre from the
+# body's frame (l at least ROUND_OFF_LENGTH): the scale of what the body adds to M(q).
+ROUND_OFF_LENGTH = 0.01  # m
 BORDERLINE = ("warn", "refuse", "accept")
 
 
+def round_off_floor(mass: float, length: float) -> float:
+    """The size below which a defect of the central inertia of a body of `mass` whose mass
+    centre is `length` from its frame is round-off (see ROUND_OFF_LENGTH)."""
+    return _ROUNDING * max(mass, 0.0) * max(length, ROUND_OFF_LENGTH) ** 2
+
+
 def check_inertia(inertia: np.ndarray, source: str, element: str, strict: bool = False,
-                  borderline: str | None = None) -> None:
+                  borderline: str | None = None, floor: float = 0.0) -> None:
     """Refuse a central inertia tensor that no rigid body can have; warn for CAD round-off.
 
     A tensor that breaks positive-definiteness or the triangle inequality by at most
@@ -617,13 +653,15 @@ def check_inertia(inertia: np.ndarray, source: str, element: str, strict: bool =
     moment is borderline: it gets a `gagen.errors.InertiaWarning` naming the element and
     the defect, or a ModelError when `strict`. `borderline` ("warn", "refuse", "accept")
     overrides that choice: a Model's own validation accepts silently, since the reader
-    of the file has already warned or refused once.
+    of the file has already warned or refused once. A defect below `floor` (kg m^2,
+    `round_off_floor` of the body's mass and size) or below 1e-9 of the largest moment is
+    round-off, not a defect: a point mass or a rod written with round-off is physical.
     """
     mode = borderline or ("refuse" if strict else "warn")
     if mode not in BORDERLINE:
         raise ValueError(f"borderline must be one of {', '.join(BORDERLINE)}, got {mode!r}")
     check_tensor(inertia, source, element)
-    defect, tolerance = _inertia_defect(np.linalg.eigvalsh(inertia))
+    defect, tolerance = _inertia_defect(np.linalg.eigvalsh(inertia), floor)
     if defect is None:
         return
     if not tolerance:
@@ -637,9 +675,9 @@ def check_inertia(inertia: np.ndarray, source: str, element: str, strict: bool =
                          f"exports ({tolerance}) but refused because strict=True (load with "
                          "strict=False to accept it with a warning, or fix the inertia)")
     if mode == "warn":
-        warnings.warn(one_line(f"{source}: {element}: {defect}; within what gagen accepts "
-                               f"from CAD exports ({tolerance}), loaded anyway (strict=True "
-                               "refuses it)"), InertiaWarning, stacklevel=2)
+        warn_user(one_line(f"{source}: {element}: {defect}; within what gagen accepts "
+                           f"from CAD exports ({tolerance}), loaded anyway (strict=True "
+                           "refuses it)"), InertiaWarning)
 
 
 def check_tensor(inertia: np.ndarray, source: str, element: str) -> None:
@@ -650,17 +688,19 @@ def check_tensor(inertia: np.ndarray, source: str, element: str) -> None:
         raise ModelError(source, element, "inertia tensor is not symmetric")
 
 
-def _inertia_defect(eig: np.ndarray) -> tuple[str | None, str]:
-    """(the defect of sorted principal moments, or None; the tolerance it is within, or "")."""
+def _inertia_defect(eig: np.ndarray, floor: float = 0.0) -> tuple[str | None, str]:
+    """(the defect of sorted principal moments, or None; the tolerance it is within, or "").
+    Defects below `floor` or _ROUNDING of the largest moment are round-off (no defect)."""
     scale = max(1e-300, np.abs(eig).max())
+    round_off = max(_ROUNDING * scale, floor)
     moments = eig.tolist()
     a, b, c = eig
-    if a < -_ROUNDING * scale:
+    if a < -round_off:
         defect = f"inertia tensor is not positive semi-definite (principal moments {moments})"
         within = -a <= INERTIA_DEFINITE_TOLERANCE * scale
         return defect, f"{INERTIA_DEFINITE_TOLERANCE:g} of the largest moment" if within else ""
     excess = (c - a - b) / scale
-    if excess > _ROUNDING:
+    if c - a - b > round_off:
         defect = (f"principal moments {moments} break the triangle inequality (each must be "
                   f"at most the sum of the other two; the largest exceeds it by {excess:.3g} "
                   "of itself)")

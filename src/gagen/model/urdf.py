@@ -17,13 +17,15 @@ cost of one addition per diagonal entry of M.
 from __future__ import annotations
 
 import math
+import warnings
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 import sympy as sp
 
+from ..errors import one_line
 from .expressions import MAX_MAGNITUDE
 from .inputs import check_body_count, name_field, parse_untrusted_xml, quote, read_description
 from .merge import merge_fixed_joints, symmetric
@@ -91,6 +93,8 @@ def parse_urdf_text(text: str | bytes, source: str = "<urdf>", strict: bool = Fa
     links = _parse_links(robot, source)
     joints = _parse_joints(robot, links, source)
     root, ordered = _tree_order(links, joints, source)
+    if floating_base and root == WORLD:
+        root, links, ordered = _floating_world_link(links, ordered)
     bodies = [_body(j, links[j.child], None if floating_base else root, source)
               for j in ordered]
     if floating_base:
@@ -110,6 +114,21 @@ def parse_urdf_text(text: str | bytes, source: str = "<urdf>", strict: bool = Fa
                       extra_frames=() if floating_base else (Frame(root, WORLD),))
     check_model_inertias(model, strict, *_LINK_INERTIA)
     return parameterize_joint_terms(parameterize_mass_properties(merge_fixed_joints(model)))
+
+
+def _floating_world_link(links: dict[str, _Link], ordered: list[_UrdfJoint]
+                         ) -> tuple[str, dict[str, _Link], list[_UrdfJoint]]:
+    """floating_base=True on a URDF whose root link is `world` (the ROS convention for a
+    robot welded to the world: the UR arms, xArm, Z1): Pinocchio floats that link, and so
+    does gagen, under the name `world_link` (`world` is gagen's fixed frame), or the first
+    name the file leaves free after it."""
+    name = "world_link"
+    while name in links:
+        name += "_"
+    links = {(name if key == WORLD else key): (replace(link, name=name) if key == WORLD
+                                                else link) for key, link in links.items()}
+    ordered = [replace(j, parent=name) if j.parent == WORLD else j for j in ordered]
+    return name, links, ordered
 
 
 def _root_body(link: _Link) -> Body:
@@ -234,11 +253,21 @@ def _parse_joints(robot: ET.Element, links: dict[str, _Link], source: str) -> li
             raise ModelError(source, f"joint {quote(joint.joint.name)}", "duplicate joint name")
         names.add(joint.joint.name)
         joints.append(joint)
-    for j in joints:
-        if j.joint.mimic is not None and j.joint.mimic not in names:
-            raise ModelError(source, f"joint {quote(j.joint.name)}, mimic",
-                             f"mimics unknown joint {quote(j.joint.mimic)}")
-    return joints
+    return [_without_dangling_mimic(j, names, source) for j in joints]
+
+
+def _without_dangling_mimic(j: _UrdfJoint, names: set[str], source: str) -> _UrdfJoint:
+    """A mimic tag naming no joint of the file (example-robot-data's alex_psyonic_hands
+    names `index_q1` for `Left_index_q1`) is dropped with a warning: gagen's mimic joints
+    are independent coordinates, so the tag changes nothing in the equations, and Pinocchio
+    loads such a file too."""
+    mimic = j.joint.mimic
+    if mimic is None or mimic in names:
+        return j
+    warnings.warn(one_line(f"{source}: joint {quote(j.joint.name)}, mimic: mimics unknown "
+                           f"joint {quote(mimic)}; the tag is ignored (a mimic joint is an "
+                           "independent coordinate in gagen)"), stacklevel=4)
+    return replace(j, joint=replace(j.joint, mimic=None))
 
 
 def _parse_joint(elem: ET.Element, k: int, links: dict[str, _Link], source: str) -> _UrdfJoint:
@@ -330,7 +359,12 @@ def _names(names: list[str], shown: int = 5) -> str:
 
 def _tree_order(links: dict[str, _Link], joints: list[_UrdfJoint],
                 source: str) -> tuple[str, list[_UrdfJoint]]:
-    """The root link and the joints depth-first from it, children in document order."""
+    """The root link and the joints depth-first from it in Pinocchio's order.
+
+    Pinocchio's URDF parser (urdfdom) keeps a link's child joints in a map by name, so
+    siblings come in the byte order of their joints' names (Python's order of str: UTF-8
+    preserves code-point order), whatever their order in the file. A q taken from
+    `pinocchio.buildModelFromUrdf` of the same file is then gagen's q."""
     parent_joint: dict[str, _UrdfJoint] = {}
     children: dict[str, list[_UrdfJoint]] = {name: [] for name in links}
     for j in joints:
@@ -347,6 +381,8 @@ def _tree_order(links: dict[str, _Link], joints: list[_UrdfJoint],
     if not roots:
         raise ModelError(source, "<robot>", "no root link: the joints form a cycle")
     root = roots[0]
+    for siblings in children.values():
+        siblings.sort(key=lambda j: j.joint.name)
     ordered: list[_UrdfJoint] = []
     stack = list(reversed(children[root]))
     while stack:

@@ -10,10 +10,12 @@ vectors (one permutation serves qd, qdd and tau, and q when no joint floats;
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
+from ..errors import SingularMassMatrixError
 from ..model.numeric import NumericModel, numeric_model
 
 
@@ -112,3 +114,121 @@ def pinocchio_mass_matrix(pm, data, q_pin) -> np.ndarray:
     out = np.empty_like(M)
     out[np.ix_(pm.gagen_order, pm.gagen_order)] = M
     return out
+
+
+# --- Pinocchio's own parse of a URDF, in its own order ---------------------------------------
+
+def urdf_joint_names(model) -> list[str]:
+    """The names of a gagen Model's (or Dynamics') moving joints, in coordinate order: for a
+    URDF, `list(pinocchio.buildModelFromUrdf(path).names)[1:]` (README: joint order)."""
+    model = getattr(model, "model", model)
+    return [b.joint.name for b in model.moving_bodies]
+
+
+def urdf_configuration(pm, q) -> np.ndarray:
+    """gagen's q of a URDF -> the q of Pinocchio's parse of the same file, whose joints come
+    in the same order: a continuous joint's angle becomes Pinocchio's (cos, sin); a free
+    flyer's 7 entries and every other joint's one are the same in both."""
+    q = np.asarray(q, dtype=float)
+    out, k = [], 0
+    for j in range(1, pm.njoints):
+        if pm.nqs[j] == 2 and pm.nvs[j] == 1:  # JointModelRUB*: unbounded revolute
+            out += [np.cos(q[k]), np.sin(q[k])]
+            k += 1
+        else:
+            out += list(q[k: k + pm.nqs[j]])
+            k += pm.nqs[j]
+    if k != len(q):
+        raise ValueError(f"q has {len(q)} entries; Pinocchio's joints take {k}")
+    return np.array(out)
+
+
+def urdf_frame_ids(pm, frames: list[str]) -> dict[str, int]:
+    """Pinocchio's frame of each of gagen's frame names (links: Pinocchio's BODY frames;
+    joints, `joint:<name>` where a link has the name: its JOINT or FIXED_JOINT frames);
+    frames Pinocchio does not have are left out."""
+    import pinocchio as pin
+
+    link_ids = {f.name: k for k, f in enumerate(pm.frames) if f.type == pin.BODY}
+    joint_ids = {f.name: k for k, f in enumerate(pm.frames)
+                 if f.type in (pin.JOINT, pin.FIXED_JOINT)}
+    out = {}
+    for name in frames:
+        if name.startswith("joint:"):
+            found = joint_ids.get(name[len("joint:"):])
+        else:
+            found = link_ids.get(name, joint_ids.get(name))
+        if found is not None:
+            out[name] = found
+    return out
+
+
+def compare_with_urdf_parse(dyn, pm, rng: np.random.Generator, states: int = 3
+                            ) -> dict[str, float]:
+    """The largest relative differences between gagen's `dyn` of a URDF and Pinocchio's
+    parse `pm` of the same file, each in its own order and with no permutation, at random
+    states: M (crba), forward dynamics (aba), inverse dynamics (rnea), and every common
+    frame's placement and Jacobian (LOCAL_WORLD_ALIGNED). Joint damping and friction are
+    set to zero (Pinocchio's algorithms leave them out). ValueError if the joints differ;
+    FD is NaN where gagen finds M(q) singular (`gagen.SingularMassMatrixError`: a joint
+    that moves no mass, as Romeo's fingers)."""
+    import pinocchio as pin
+
+    names = urdf_joint_names(dyn)
+    if names != list(pm.names)[1:]:
+        raise ValueError("gagen's joints are not Pinocchio's, in order")
+    data = pm.createData()
+    rigid = {k: 0.0 for k in dyn.parameters if k.startswith(("damping_", "friction_"))}
+    frames = urdf_frame_ids(pm, dyn.frames)
+    errors = dict.fromkeys(("M", "FD", "ID", "placement", "jacobian"), 0.0)
+    for _ in range(states):
+        q = dyn.neutral() if hasattr(dyn, "neutral") else np.zeros(dyn.nq)
+        q = np.array(q, dtype=float)
+        moving = [k for k, name in enumerate(dyn.configuration)
+                  if not name.endswith(("_qx", "_qy", "_qz", "_qw"))]
+        q[moving] = rng.uniform(-1, 1, len(moving))
+        if dyn.nq > dyn.nv:  # a floating base: any orientation
+            quat = rng.normal(size=4)
+            q[3:7] = quat / np.linalg.norm(quat)
+        qd, u, qdd = (rng.uniform(-1, 1, dyn.nv) for _ in range(3))
+        q_pin = urdf_configuration(pm, q)
+        M = np.array(pin.crba(pm, data, q_pin))
+        M = np.triu(M) + np.triu(M, 1).T
+        errors["M"] = max(errors["M"], _relative(dyn.mass_matrix(q, p=rigid), M))
+        # (random accelerations for the inverse dynamics: aba's can be large where M is
+        # ill-conditioned, and tau's scale would then not be M qdd's)
+        try:
+            ours = dyn.forward_dynamics(q, qd, u, p=rigid)
+        except SingularMassMatrixError:  # a joint that moves no mass: no FD (NaN here)
+            errors["FD"] = math.nan
+        else:
+            fd = np.array(pin.aba(pm, data, q_pin, qd, u))
+            errors["FD"] = _worse(errors["FD"], _relative(ours, fd))
+        tau = np.array(pin.rnea(pm, data, q_pin, qd, qdd))
+        errors["ID"] = max(errors["ID"], _relative(dyn.inverse_dynamics(q, qd, qdd, p=rigid),
+                                                   tau))
+        pin.computeJointJacobians(pm, data, q_pin)
+        pin.updateFramePlacements(pm, data)
+        for name, k in frames.items():
+            R, p = dyn.frame_placement(q, name)
+            placed = data.oMf[k]
+            errors["placement"] = max(errors["placement"],
+                                      _relative(np.hstack([R, p[:, None]]),
+                                                np.hstack([placed.rotation,
+                                                           placed.translation[:, None]])))
+            J = pin.getFrameJacobian(pm, data, k, pin.LOCAL_WORLD_ALIGNED)
+            errors["jacobian"] = max(errors["jacobian"],
+                                     _relative(dyn.frame_jacobian(q, name), J))
+    return errors
+
+
+def _worse(a: float, b: float) -> float:
+    """The larger of two errors; NaN (no value) wins."""
+    return math.nan if math.isnan(a) or math.isnan(b) else max(a, b)
+
+
+def _relative(actual, expected) -> float:
+    """max |actual - expected| over max(max |expected|, 1)."""
+    expected = np.asarray(expected, dtype=float)
+    scale = max(float(np.abs(expected).max()), 1.0)
+    return float(np.abs(np.asarray(actual, dtype=float) - expected).max()) / scale

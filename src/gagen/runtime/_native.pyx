@@ -14,14 +14,18 @@ is gagen.runtime.dynamics.Dynamics's); gagen.sim runs CompiledSimulation and Com
 
 import numpy as np
 cimport numpy as cnp
+from cpython.dict cimport PyDict_GetItem
 from cpython.exc cimport PyErr_CheckSignals
+from cpython.object cimport PyObject
 from cpython.pycapsule cimport PyCapsule_GetPointer
+from libc.float cimport DBL_MAX, DBL_MIN
 from libc.math cimport NAN, isfinite
 from libc.stdint cimport int32_t, int64_t
 from libc.stdlib cimport free, malloc
 
 from gagen.errors import NonFiniteStateError, SingularMassMatrixError
-from gagen.runtime.inputs import as_float_array
+from gagen.runtime.inputs import as_float_array, as_states, nonfinite_cause, quaternion_error
+from gagen.runtime.taskspace import KINDS, REFERENCES, kind_code, reference_code
 
 cnp.import_array()
 
@@ -71,10 +75,10 @@ cdef extern from "gagen_api.h" nogil:
         void (*frame_offsets)(const double *p, double *F) noexcept nogil
         int (*frame_placement)(const double *q, const double *p, int frame, double *R,
                                double *pos) noexcept nogil
-        int (*frame_jacobian)(const double *q, const double *p, int frame,
+        int (*frame_jacobian)(const double *q, const double *p, int frame, int reference,
                               double *J) noexcept nogil
         int (*frame_velocity)(const double *q, const double *qd, const double *p, int frame,
-                              double *v) noexcept nogil
+                              int reference, double *v) noexcept nogil
         void (*regressor)(const double *q, const double *qd, const double *qdd,
                           const double *p, double *Y) noexcept nogil
         void (*regressor_parameters)(const double *p, double *pi) noexcept nogil
@@ -86,6 +90,30 @@ cdef extern from "gagen_api.h" nogil:
         int (*control_torques)(const gagen_control *c, const double *p, long m,
                                const double *t, const double *y,
                                double *tau) noexcept nogil
+        void (*center_of_mass)(const double *q, const double *p, double *com) noexcept nogil
+        void (*com_velocity)(const double *q, const double *qd, const double *p,
+                             double *vcom) noexcept nogil
+        void (*com_jacobian)(const double *q, const double *p, double *J) noexcept nogil
+        void (*centroidal_map)(const double *q, const double *p, double *Ag) noexcept nogil
+        void (*centroidal_momentum)(const double *q, const double *qd, const double *p,
+                                    double *hg) noexcept nogil
+        void (*centroidal_map_time_variation)(const double *q, const double *qd,
+                                              const double *p, double *dAg) noexcept nogil
+        void (*centroidal_bias)(const double *q, const double *qd, const double *p,
+                                double *b) noexcept nogil
+        int (*frame_jacobians)(const double *q, const double *p, int count, const int *frames,
+                               int reference, double *J) noexcept nogil
+        int (*frame_acceleration)(const double *q, const double *qd, const double *qdd,
+                                  const double *p, int frame, int reference, int kind,
+                                  double *a) noexcept nogil
+        int (*frame_jacobian_time_variation)(const double *q, const double *qd,
+                                             const double *p, int frame, int reference,
+                                             double *dJ) noexcept nogil
+        int (*delassus)(const double *q, const double *p, int count, const int *frames,
+                        int dims, double *work, double *G) noexcept nogil
+        int (*operational_space_inertia)(const double *q, const double *p, int count,
+                                         const int *frames, int dims, double *work,
+                                         double *Lambda) noexcept nogil
     ctypedef struct gagen_derivatives_api:
         int version
         const char *ident
@@ -207,6 +235,25 @@ cdef inline bint _all_finite(const double *x, Py_ssize_t n) noexcept:
     return True
 
 
+cdef int _bad_quaternion(const double *q, Py_ssize_t rows, Py_ssize_t step,
+                         const int *offsets, int count, Py_ssize_t *row) noexcept nogil:
+    """The first quaternion (its index in offsets; its row in *row) whose squared norm is
+    not a finite normal double (NaN or inf entries included), or -1
+    (gagen.runtime.inputs.check_quaternions says why)."""
+    cdef Py_ssize_t i
+    cdef int k
+    cdef const double *x
+    cdef double n2
+    for i in range(rows):
+        for k in range(count):
+            x = q + i * step + offsets[k]
+            n2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3]
+            if not (n2 >= DBL_MIN and n2 <= DBL_MAX):
+                row[0] = i
+                return k
+    return -1
+
+
 cdef inline double *_data(cnp.ndarray a) noexcept:
     return <double *>cnp.PyArray_DATA(a)
 
@@ -246,12 +293,12 @@ cdef inline cnp.ndarray _matrices(Py_ssize_t rows, Py_ssize_t r, Py_ssize_t c):
     return cnp.PyArray_EMPTY(3, dims, cnp.NPY_DOUBLE, 0)
 
 
-def _raise_not_positive_definite(str ident, int err_nonfinite, row, status=1):
+def _raise_not_positive_definite(str ident, int err_nonfinite, row, status=1, q=None):
     where = "" if row < 0 else f" (stacked input, row {row})"
     if status == err_nonfinite:
         raise NonFiniteStateError(
             f"the mass matrix of model '{ident}' is NaN or inf at this state{where}: "
-            "q holds NaN or inf")
+            + nonfinite_cause(q))
     raise SingularMassMatrixError(
         f"the mass matrix of model '{ident}' is singular or not positive definite at this "
         f"state{where}; check the state for NaN or inf and the parameters for zero or "
@@ -268,6 +315,9 @@ cdef class _Evaluator:
     cdef readonly str ident
     cdef readonly object parameter_vector
     cdef object _capsule  # keeps the module's table (and the module) alive
+    cdef int *_quaternions  # where each floating joint's quaternion starts in q
+    cdef int _nquaternions
+    cdef readonly tuple quaternions  # (first entry in q, description) of each
 
     cdef void _adopt(self, object capsule, const char *ident, int np_, int err_nonfinite,
                      const double *defaults):
@@ -276,6 +326,38 @@ cdef class _Evaluator:
         self.np_ = np_
         self.err_nonfinite = err_nonfinite
         self._defaults = defaults
+
+    cdef int _set_quaternions(self, object quaternions, int nq) except -1:
+        """The quaternions that q's checks look at (ModelInfo.quaternions())."""
+        self.quaternions = tuple((int(offset), str(label)) for offset, label in quaternions)
+        if any(not 0 <= offset <= nq - 4 for offset, _ in self.quaternions):
+            raise ValueError(f"a quaternion must lie within q's {nq} entries")
+        self._nquaternions = len(self.quaternions)
+        if self._nquaternions:
+            self._quaternions = <int *>malloc(self._nquaternions * sizeof(int))
+            if self._quaternions == NULL:
+                raise MemoryError()
+            for k, (offset, _) in enumerate(self.quaternions):
+                self._quaternions[k] = offset
+        return 0
+
+    def __dealloc__(self):
+        free(self._quaternions)
+
+    cdef int _check_quaternions(self, cnp.ndarray q, Py_ssize_t rows, str name) except -1:
+        """ValueError for a quaternion of q that cannot be normalised (one state, or
+        `rows` stacked ones)."""
+        if self._nquaternions == 0:
+            return 0
+        cdef Py_ssize_t row = 0
+        cdef int k = _bad_quaternion(_data(q), rows if rows >= 0 else 1, _step(q),
+                                     self._quaternions, self._nquaternions, &row)
+        if k >= 0:
+            offset, label = self.quaternions[k]
+            values = q[row] if rows >= 0 else q
+            raise quaternion_error(name, label, row if rows >= 0 else -1,
+                                   values[offset: offset + 4])
+        return 0
 
     cdef cnp.ndarray _parameters(self, object p):
         if type(p) is np.ndarray and cnp.PyArray_TYPE(<cnp.ndarray>p) == cnp.NPY_DOUBLE \
@@ -294,8 +376,10 @@ cdef class _Evaluator:
         keep.append(pa)
         return <const double *>cnp.PyArray_DATA(pa)
 
-    cdef _failed(self, Py_ssize_t row, int status):
-        _raise_not_positive_definite(self.ident, self.err_nonfinite, row, status)
+    cdef _failed(self, Py_ssize_t row, int status, cnp.ndarray q):
+        """Raise for a kernel's failure at one state (row -1) or a stacked one's row."""
+        _raise_not_positive_definite(self.ident, self.err_nonfinite, row, status,
+                                     q if row < 0 else q[row])
 
 
 # --- the model's kernels ------------------------------------------------------------------
@@ -330,6 +414,26 @@ cdef inline int _call(const gagen_model_api *api, Kernel kernel, const double *a
     return 0
 
 
+cdef inline void _call_centroidal(const gagen_model_api *api, int which, const double *q,
+                                  const double *qd, const double *p,
+                                  double *out) noexcept nogil:
+    """One centroidal kernel (CompiledModel.centroidal's numbering) at one state."""
+    if which == 0:
+        api.center_of_mass(q, p, out)
+    elif which == 1:
+        api.com_velocity(q, qd, p, out)
+    elif which == 2:
+        api.com_jacobian(q, p, out)
+    elif which == 3:
+        api.centroidal_map(q, p, out)
+    elif which == 4:
+        api.centroidal_momentum(q, qd, p, out)
+    elif which == 5:
+        api.centroidal_map_time_variation(q, qd, p, out)
+    else:
+        api.centroidal_bias(q, qd, p, out)
+
+
 cdef class CompiledModel(_Evaluator):
     """The compiled kernels of a model's module, from its capsule `API`;
     `parameter_vector` turns the p= forms other than a float64 array into one,
@@ -337,13 +441,19 @@ cdef class CompiledModel(_Evaluator):
 
     cdef const gagen_model_api *api
     cdef readonly object external_forces
+    cdef dict _frame_numbers  # frame name -> number
+    cdef object _frame_index  # (frame) -> number, or the error that names the choices
 
-    def __init__(self, capsule, parameter_vector, external_forces=None):
+    def __init__(self, capsule, parameter_vector, external_forces=None, quaternions=(),
+                 frame_numbers=None, frame_index=None):
         self.api = <const gagen_model_api *>_table(capsule, MODEL_CAPSULE)
         self._adopt(capsule, self.api.ident, self.api.np, self.api.err_nonfinite,
                     self.api.parameter_defaults)
+        self._set_quaternions(quaternions, self.api.nq)
         self.parameter_vector = parameter_vector
         self.external_forces = external_forces
+        self._frame_numbers = dict(frame_numbers or {})
+        self._frame_index = frame_index
 
     cdef object _run(self, Kernel kernel, Py_ssize_t nout, object x, object y, object z,
                      object p, str nx, str ny, str nz):
@@ -359,12 +469,13 @@ cdef class CompiledModel(_Evaluator):
             rows = _rows(b, rows, ny)
         if nz is not None:
             rows = _rows(c, rows, nz)
+        self._check_quaternions(a, rows, nx)
         cdef cnp.ndarray out = _vectors(rows, nout)
         cdef int status = 0
         if rows < 0:
             status = _call(api, kernel, _data(a), _data(b), _data(c), pp, _data(out))
             if status:
-                self._failed(-1, status)
+                self._failed(-1, status, a)
             return out
         cdef double *pa_ = _data(a)
         cdef double *pb = _data(b)
@@ -394,7 +505,7 @@ cdef class CompiledModel(_Evaluator):
                 gagen_stream_fence()
         free(scratch)
         if failed >= 0:
-            self._failed(failed, status)
+            self._failed(failed, status, a)
         return out
 
     def mass_matrix(self, q, p=None):
@@ -412,7 +523,8 @@ cdef class CompiledModel(_Evaluator):
     def forward_dynamics(self, q, qd, tau, p=None, fext=None):
         """qdd = M(q)^-1 F(q, qd, tau [+ J^T w of the wrenches fext])."""
         if fext is not None:
-            tau = as_float_array(tau, "tau") + self.external_forces(q, fext, p)
+            (q, tau), _ = as_states((self.api.nq, self.api.nv), q, tau, names=("q", "tau"))
+            tau = tau + self.external_forces(q, fext, p)
         return self._run(FORWARD_DYNAMICS, self.api.nv, q, qd, tau, p, "q", "qd", "tau")
 
     def inverse_dynamics(self, q, qd, qdd, p=None, fext=None):
@@ -436,19 +548,27 @@ cdef class CompiledModel(_Evaluator):
         self.api.frame_offsets(pp, _data(out))
         return out
 
-    def frame(self, int which, int frame, q, qd, p=None):
+    def frame(self, int which, int frame, q, qd, p=None, int reference=2):
         """A frame's placement (which 0: R and origin, 12 values), Jacobian (1: 6 x NV) or
-        velocity (2: 6 values) at one state or stacked states."""
+        velocity (2: 6 values) at one state or stacked states; the last two in `reference`
+        (0 WORLD, 1 LOCAL, 2 LOCAL_WORLD_ALIGNED)."""
+        return self._frame(which, frame, q, qd, p, reference)
+
+    cdef object _frame(self, int which, int frame, object q, object qd, object p,
+                       int reference):
         cdef const gagen_model_api *api = self.api
         if not 0 <= frame < api.nf:
             raise IndexError(f"frame {frame} out of range (0 .. {api.nf - 1})")
+        if not 0 <= reference <= 2:
+            raise ValueError(f"reference {reference} is not 0, 1 or 2")
         cdef cnp.ndarray a = _state(q, "q", api.nq)
         cdef cnp.ndarray b = _state(qd, "qd", api.nv) if which == 2 else a
-        cdef list keep = []
+        cdef list keep = None if p is None else []
         cdef const double *pp = self._parameter_data(p, keep)
         cdef Py_ssize_t rows = _rows(a, -1, "q")
         if which == 2:
             rows = _rows(b, rows, "qd")
+        self._check_quaternions(a, rows, "q")
         cdef int nout = 12 if which == 0 else (6 * api.nv if which == 1 else 6)
         # allocated in its final shape (a reshape or a row view afterwards costs more than
         # the kernel on a small robot)
@@ -456,17 +576,225 @@ cdef class CompiledModel(_Evaluator):
         cdef double *pa_ = _data(a)
         cdef double *pb = _data(b)
         cdef double *po = _data(out)
-        cdef Py_ssize_t sa = _step(a), sb = _step(b), i, count = rows if rows >= 0 else 1
+        cdef Py_ssize_t sa = _step(a), sb = _step(b)
+        if rows < 0:  # one state: releasing the GIL would cost more than the kernel
+            _frame_loop(api, which, frame, reference, pa_, sa, pb, sb, pp, po, nout, 1)
+        else:
+            with nogil:
+                _frame_loop(api, which, frame, reference, pa_, sa, pb, sb, pp, po, nout, rows)
+        return out
+
+    # --- task space: frames' accelerations, Jacobians' time variation and the
+    # operational-space inertia (conventions: gagen.runtime.taskspace) --------------------
+
+    # The frame methods by name (CompiledDynamics binds them: their documentation is
+    # Dynamics's): a frame's name and the reference and kind are looked up in dicts
+    # first, anything else takes the checked path, which names what is wrong.
+
+    cdef int _frame_number(self, object frame) except -1:
+        cdef PyObject *k = PyDict_GetItem(self._frame_numbers, frame) \
+            if type(frame) is str else NULL
+        if k == NULL:
+            return self._frame_index(frame)
+        return <object>k
+
+    def frame_jacobian(self, q, frame, reference="local_world_aligned", p=None):
+        """The frame's Jacobian (a list of frames: theirs) in `reference`."""
+        if type(frame) is list or type(frame) is tuple:
+            return self.frame_jacobians([self._frame_index(f) for f in frame],
+                                        _reference_number(reference), q, p)
+        return self._frame(1, self._frame_number(frame), q, None, p,
+                           _reference_number(reference))
+
+    def frame_velocity(self, q, qd, frame, reference="local_world_aligned", p=None):
+        """The frame's velocity in `reference`."""
+        return self._frame(2, self._frame_number(frame), q, qd, p,
+                           _reference_number(reference))
+
+    def frame_acceleration(self, q, qd, qdd, frame, reference="local_world_aligned",
+                           kind="classical", p=None):
+        """The frame's acceleration at qdd in `reference`, classical or spatial."""
+        return self._frame_rates(0, self._frame_number(frame), _reference_number(reference),
+                                 _kind_number(kind), q, qd, qdd, p)
+
+    def frame_bias_acceleration(self, q, qd, frame, reference="local_world_aligned",
+                                kind="classical", p=None):
+        """The frame's acceleration at qdd = 0 (J̇ qd in that convention)."""
+        return self._frame_rates(1, self._frame_number(frame), _reference_number(reference),
+                                 _kind_number(kind), q, qd, None, p)
+
+    def frame_jacobian_time_variation(self, q, qd, frame, reference="local_world_aligned",
+                                      p=None):
+        """dJ/dt of the frame's Jacobian in `reference` along qd."""
+        return self._frame_rates(2, self._frame_number(frame), _reference_number(reference),
+                                 0, q, qd, None, p)
+
+    def frame_rates(self, int which, int frame, int reference, int kind, q, qd, qdd=None,
+                    p=None):
+        """Frame `frame`'s acceleration at qdd (which 0: 6 values, kind 0 classical or 1
+        spatial), its bias acceleration at qdd = 0 (1), or its Jacobian's time variation
+        (2: 6 x NV), in `reference` (0 WORLD, 1 LOCAL, 2 LOCAL_WORLD_ALIGNED), at one state
+        or stacked states."""
+        return self._frame_rates(which, frame, reference, kind, q, qd, qdd, p)
+
+    cdef object _frame_rates(self, int which, int frame, int reference, int kind, object q,
+                             object qd, object qdd, object p):
+        cdef const gagen_model_api *api = self.api
+        if not 0 <= frame < api.nf:
+            raise IndexError(f"frame {frame} out of range (0 .. {api.nf - 1})")
+        if not (0 <= reference <= 2 and 0 <= kind <= 1 and 0 <= which <= 2):
+            raise ValueError(f"which {which}, reference {reference} or kind {kind} out of range")
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef cnp.ndarray b = _state(qd, "qd", api.nv)
+        cdef cnp.ndarray c = _state(qdd, "qdd", api.nv) if which == 0 else b
+        cdef list keep = None if p is None else []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(b, _rows(a, -1, "q"), "qd")
+        if which == 0:
+            rows = _rows(c, rows, "qdd")
+        self._check_quaternions(a, rows, "q")
+        cdef int nout = 6 * api.nv if which == 2 else 6
+        cdef cnp.ndarray out = _matrices(rows, 6, api.nv) if which == 2 else _vectors(rows, 6)
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *pc = _data(c) if which == 0 else NULL
+        cdef double *po = _data(out)
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), sc = _step(c)
+        if rows < 0:  # one state: releasing the GIL would cost more than the kernel
+            _frame_rates_loop(api, which, frame, reference, kind, pa_, sa, pb, sb, pc, sc,
+                              pp, po, nout, 1)
+        else:
+            with nogil:
+                _frame_rates_loop(api, which, frame, reference, kind, pa_, sa, pb, sb, pc,
+                                  sc, pp, po, nout, rows)
+        return out
+
+    def frame_jacobians(self, frames, int reference, q, p=None):
+        """The Jacobians of several frames (frame numbers) in `reference`, their common
+        ancestors placed once: (k, 6, NV), or (N, k, 6, NV) for stacked q."""
+        cdef const gagen_model_api *api = self.api
+        if not 0 <= reference <= 2:
+            raise ValueError(f"reference {reference} is not 0, 1 or 2")
+        cdef cnp.ndarray fr = _frame_numbers(frames, api.nf)
+        cdef int k = <int>cnp.PyArray_SIZE(fr)
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef list keep = []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(a, -1, "q")
+        self._check_quaternions(a, rows, "q")
+        cdef object shape = (k, 6, api.nv)
+        if rows >= 0:
+            shape = (rows,) + shape
+        cdef cnp.ndarray out = np.empty(shape)
+        cdef const int *pf = <const int *>cnp.PyArray_DATA(fr)
+        cdef double *pa_ = _data(a)
+        cdef double *po = _data(out)
+        cdef Py_ssize_t sa = _step(a), nout = 6 * k * api.nv, i
+        cdef Py_ssize_t count = rows if rows >= 0 else 1
+        with nogil:
+            for i in range(count):
+                api.frame_jacobians(pa_ + i * sa, pp, k, pf, reference, po + i * nout)
+        return out
+
+    def task_matrix(self, int which, frames, int dims, q, p=None):
+        """For the stacked rows (the first `dims` of each frame's LOCAL_WORLD_ALIGNED
+        Jacobian) of several frames: J M^-1 J^T (which 0) or its inverse, the
+        operational-space inertia (1); (m, m) or (N, m, m), m = dims * frames. Returns
+        (matrix, status, row): status 0, or the C's code for dependent rows at that row
+        (-1: not stacked); M's failures raise as forward dynamics's."""
+        cdef const gagen_model_api *api = self.api
+        if dims != 3 and dims != 6:
+            raise ValueError(f"dims must be 3 or 6; got {dims}")
+        cdef cnp.ndarray fr = _frame_numbers(frames, api.nf)
+        cdef int k = <int>cnp.PyArray_SIZE(fr)
+        if k < 1:
+            raise ValueError("frames must name at least one frame")
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef list keep = []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(a, -1, "q"), m = dims * k
+        self._check_quaternions(a, rows, "q")
+        cdef cnp.ndarray out = _matrices(rows, m, m)
+        cdef const int *pf = <const int *>cnp.PyArray_DATA(fr)
+        cdef double *pa_ = _data(a)
+        cdef double *po = _data(out)
+        cdef Py_ssize_t sa = _step(a), i, failed = -1
+        cdef Py_ssize_t count = rows if rows >= 0 else 1
+        cdef int code, status = 0
+        cdef double *work = <double *>malloc(m * api.nv * sizeof(double))
+        if work == NULL:
+            raise MemoryError()
         with nogil:
             for i in range(count):
                 if which == 0:
-                    api.frame_placement(pa_ + i * sa, pp, frame, po + i * nout,
-                                        po + i * nout + 9)
-                elif which == 1:
-                    api.frame_jacobian(pa_ + i * sa, pp, frame, po + i * nout)
+                    code = api.delassus(pa_ + i * sa, pp, k, pf, dims, work, po + i * m * m)
                 else:
-                    api.frame_velocity(pa_ + i * sa, pb + i * sb, pp, frame, po + i * nout)
+                    code = api.operational_space_inertia(pa_ + i * sa, pp, k, pf, dims, work,
+                                                         po + i * m * m)
+                if code != 0 and failed < 0:
+                    failed = i
+                    status = code
+        free(work)
+        if status != 0 and (status == self.err_nonfinite or status == 1):
+            self._failed(failed if rows >= 0 else -1, status, a)
+        return out, status, (failed if rows >= 0 else -1)
+
+    cdef object _centroidal(self, int which, object q, object qd, object p):
+        """A centroidal kernel (_call_centroidal's numbering) at one state or stacked
+        states, into a fresh array of its final shape."""
+        cdef const gagen_model_api *api = self.api
+        cdef bint rates = qd is not None
+        cdef cnp.ndarray a = _state(q, "q", api.nq)
+        cdef cnp.ndarray b = _state(qd, "qd", api.nv) if rates else a
+        cdef list keep = []
+        cdef const double *pp = self._parameter_data(p, keep)
+        cdef Py_ssize_t rows = _rows(a, -1, "q")
+        if rates:
+            rows = _rows(b, rows, "qd")
+        cdef int height = 3 if which <= 2 else 6
+        cdef bint matrix = which == 2 or which == 3 or which == 5
+        cdef int nout = height * api.nv if matrix else height
+        cdef cnp.ndarray out = _matrices(rows, height, api.nv) if matrix \
+            else _vectors(rows, height)
+        cdef double *pa_ = _data(a)
+        cdef double *pb = _data(b)
+        cdef double *po = _data(out)
+        cdef Py_ssize_t sa = _step(a), sb = _step(b), i
+        if rows < 0:  # one state: releasing the GIL would cost more than the kernel saves
+            _call_centroidal(api, which, pa_, pb, pp, po)
+            return out
+        with nogil:
+            for i in range(rows):
+                _call_centroidal(api, which, pa_ + i * sa, pb + i * sb, pp, po + i * nout)
         return out
+
+    def center_of_mass(self, q, p=None):
+        """The centre of mass in the world, (3,) or (N, 3)."""
+        return self._centroidal(0, q, None, p)
+
+    def com_velocity(self, q, qd, p=None):
+        """The centre of mass's velocity, (3,) or (N, 3)."""
+        return self._centroidal(1, q, qd, p)
+
+    def com_jacobian(self, q, p=None):
+        """J_com, (3, nv) or (N, 3, nv): com_velocity = J_com qd."""
+        return self._centroidal(2, q, None, p)
+
+    def centroidal_map(self, q, p=None):
+        """A_g, (6, nv) or (N, 6, nv): h_g = A_g qd."""
+        return self._centroidal(3, q, None, p)
+
+    def centroidal_momentum(self, q, qd, p=None):
+        """h_g, (6,) or (N, 6): linear momentum, angular momentum about the centre of mass."""
+        return self._centroidal(4, q, qd, p)
+
+    def centroidal_map_time_variation(self, q, qd, p=None):
+        """d/dt A_g, (6, nv) or (N, 6, nv)."""
+        return self._centroidal(5, q, qd, p)
+
+    def centroidal_bias(self, q, qd, p=None):
+        """d/dt A_g qd, (6,) or (N, 6): d/dt h_g = A_g qdd + centroidal_bias."""
+        return self._centroidal(6, q, qd, p)
 
     def gravity(self, q, p=None):
         """The gravity torques g(q) = inverse_dynamics(q, 0, 0)."""
@@ -536,6 +864,73 @@ def _frame_wrenches(frames, wrenches, int nf):
         raise ValueError(f"frames must be frame numbers in 0 .. {nf - 1}, one finite wrench "
                          "(6 values) each")
     return fr, wr
+
+
+cdef dict _REFERENCES = REFERENCES
+cdef dict _KINDS = KINDS
+
+
+cdef int _reference_number(object reference) except -1:
+    """A reference's number (Pinocchio's: 0 WORLD, 1 LOCAL, 2 LOCAL_WORLD_ALIGNED)."""
+    cdef PyObject *code = PyDict_GetItem(_REFERENCES, reference) \
+        if type(reference) is str else NULL
+    return reference_code(reference) if code == NULL else <object>code
+
+
+cdef int _kind_number(object kind) except -1:
+    """An acceleration kind's number (0 classical, 1 spatial)."""
+    cdef PyObject *code = PyDict_GetItem(_KINDS, kind) if type(kind) is str else NULL
+    return kind_code(kind) if code == NULL else <object>code
+
+
+cdef void _frame_loop(const gagen_model_api *api, int which, int frame, int reference,
+                      const double *q, Py_ssize_t sq, const double *qd, Py_ssize_t sqd,
+                      const double *p, double *out, Py_ssize_t nout,
+                      Py_ssize_t count) noexcept nogil:
+    """A frame kernel (which 0 placement, 1 Jacobian, 2 velocity) at `count` states."""
+    cdef Py_ssize_t i
+    for i in range(count):
+        if which == 0:
+            api.frame_placement(q + i * sq, p, frame, out + i * nout, out + i * nout + 9)
+        elif which == 1:
+            api.frame_jacobian(q + i * sq, p, frame, reference, out + i * nout)
+        else:
+            api.frame_velocity(q + i * sq, qd + i * sqd, p, frame, reference,
+                               out + i * nout)
+
+
+cdef void _frame_rates_loop(const gagen_model_api *api, int which, int frame, int reference,
+                            int kind, const double *q, Py_ssize_t sq, const double *qd,
+                            Py_ssize_t sqd, const double *qdd, Py_ssize_t sqdd,
+                            const double *p, double *out, Py_ssize_t nout,
+                            Py_ssize_t count) noexcept nogil:
+    """A frame's acceleration (which 0), bias acceleration (1, qdd NULL) or Jacobian's
+    time variation (2) at `count` states."""
+    cdef Py_ssize_t i
+    for i in range(count):
+        if which == 2:
+            api.frame_jacobian_time_variation(q + i * sq, qd + i * sqd, p, frame, reference,
+                                              out + i * nout)
+        else:
+            api.frame_acceleration(q + i * sq, qd + i * sqd,
+                                   qdd + i * sqdd if qdd != NULL else NULL, p, frame,
+                                   reference, kind, out + i * nout)
+
+
+cdef cnp.ndarray _frame_numbers(object frames, int nf):
+    """Frame numbers (a sequence of ints) as a fresh int32 array, each in 0 .. nf - 1."""
+    cdef Py_ssize_t k, n = len(frames)
+    cdef cnp.npy_intp dims[1]
+    dims[0] = n
+    cdef cnp.ndarray fr = cnp.PyArray_EMPTY(1, dims, cnp.NPY_INT32, 0)
+    cdef int32_t *data = <int32_t *>cnp.PyArray_DATA(fr)
+    cdef long f
+    for k in range(n):
+        f = frames[k]
+        if not 0 <= f < nf:
+            raise IndexError(f"frame {f} out of range (0 .. {nf - 1})")
+        data[k] = <int32_t>f
+    return fr
 
 
 cdef int _method_code(str method) except -1:
@@ -881,10 +1276,11 @@ cdef class CompiledDerivatives(_Evaluator):
 
     cdef const gagen_derivatives_api *api
 
-    def __init__(self, capsule, parameter_vector):
+    def __init__(self, capsule, parameter_vector, quaternions=()):
         self.api = <const gagen_derivatives_api *>_table(capsule, DERIVATIVES_CAPSULE)
         self._adopt(capsule, self.api.ident, self.api.np, self.api.err_nonfinite,
                     self.api.parameter_defaults)
+        self._set_quaternions(quaternions, self.api.nq)
         self.parameter_vector = parameter_vector
 
     cdef tuple _run(self, Derivative kernel, int count, Py_ssize_t r0, Py_ssize_t c0,
@@ -903,6 +1299,7 @@ cdef class CompiledDerivatives(_Evaluator):
             rows = _rows(b, rows, ny)
         if nz is not None:
             rows = _rows(c, rows, nz)
+        self._check_quaternions(a, rows, nx)
         cdef cnp.ndarray m0 = _matrices(rows, r0, c0)
         cdef cnp.ndarray m1 = _matrices(rows, r1, c1) if count > 1 else m0
         cdef cnp.ndarray m2 = _matrices(rows, r1, c1) if count > 2 else m0
@@ -930,7 +1327,7 @@ cdef class CompiledDerivatives(_Evaluator):
                         failed = i
                         status = code
         if status:
-            self._failed(failed, status)
+            self._failed(failed, status, a)
         if count == 1:
             return (m0,)
         if count == 2:

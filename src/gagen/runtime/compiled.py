@@ -3,13 +3,23 @@ API of `Dynamics` (no SymPy: names and defaults come from the module's manifest)
 
 from __future__ import annotations
 
+from functools import partial
+
 from ..errors import BuildError
 from ..manifest import ModelInfo
 from .dynamics import Dynamics
 from .frames import frame_index
+from .taskspace import singular_task, task_dims, task_frames
 
 KERNEL_METHODS = ("mass_matrix", "forcing", "forward_dynamics", "inverse_dynamics",
                   "gravity", "energy", "regressor", "regressor_parameters")
+# the centre of mass and centroidal dynamics (centroidal.c), bound like KERNEL_METHODS
+CENTROIDAL_METHODS = ("center_of_mass", "com_velocity", "com_jacobian", "centroidal_map",
+                      "centroidal_momentum", "centroidal_map_time_variation",
+                      "centroidal_bias")
+# the frames' methods, by name (gagen.runtime.taskspace has their conventions)
+FRAME_METHODS = ("frame_jacobian", "frame_velocity", "frame_acceleration",
+                 "frame_bias_acceleration", "frame_jacobian_time_variation")
 # the methods of a model's derivative module (codegen/derivatives.py), bound on first use
 DERIVATIVE_METHODS = ("inverse_dynamics_derivatives", "forward_dynamics_derivatives",
                       "coriolis_matrix", "linearize")
@@ -43,9 +53,12 @@ class CompiledDynamics(Dynamics):
         self._derivatives = derivatives
         self.derivative_module = None
         self.kernels = native().CompiledModel(module.API, self.parameter_vector,
-                                              self.external_forces)
-        for name in KERNEL_METHODS:
+                                              self.external_forces, self.info.quaternions(),
+                                              self.info.frame_indices,
+                                              partial(frame_index, self.info))
+        for name in KERNEL_METHODS + CENTROIDAL_METHODS + FRAME_METHODS:
             setattr(self, name, getattr(self.kernels, name))
+        self._frame_numbers = self.info.frame_indices
 
     # frames: the C of frames.c, one call per state (stacked states in one C loop)
 
@@ -59,11 +72,31 @@ class CompiledDynamics(Dynamics):
         out = self.kernels.frame(0, frame_index(self.info, frame), q, None, p)
         return out[..., :9].reshape(out.shape[:-1] + (3, 3)), out[..., 9:].copy()
 
-    def frame_jacobian(self, q, frame, p=None):
-        return self.kernels.frame(1, frame_index(self.info, frame), q, None, p)
+    # task space: the C of taskspace.c.j2 (in frames.c); the frames' kernels are bound
 
-    def frame_velocity(self, q, qd, frame, p=None):
-        return self.kernels.frame(2, frame_index(self.info, frame), q, qd, p)
+    def delassus(self, q, frames, dims=6, p=None):
+        return self._task_matrix(0, q, frames, dims, p)
+
+    def operational_space_inertia(self, q, frames, dims=6, p=None):
+        return self._task_matrix(1, q, frames, dims, p)
+
+    def _task_matrix(self, which: int, q, frames, dims, p):
+        """J M^-1 J^T (which 0) or its inverse (1) from the C, the frames checked here."""
+        try:  # one frame by name
+            indices = [self._frame_numbers[frames]]
+        except (KeyError, TypeError):
+            indices = task_frames(self.info, frames)
+        if type(dims) is not int or (dims != 6 and dims != 3):
+            dims = task_dims(dims)
+        if which == 1 and dims * len(indices) > self.nv:
+            raise singular_task(self.info, indices, dims, -1)
+        out, status, row = self.kernels.task_matrix(which, indices, dims, q, p)
+        if status:
+            raise singular_task(self.info, indices, dims, row)
+        return out
+
+    delassus.__doc__ = Dynamics.delassus.__doc__
+    operational_space_inertia.__doc__ = Dynamics.operational_space_inertia.__doc__
 
     # --- derivatives: the second module ---------------------------------------------------
 
@@ -84,7 +117,8 @@ class CompiledDynamics(Dynamics):
                 f"the derivative module {module.__name__} was not built from the equations of "
                 f"{self.module.__name__} (its key {module.EQUATIONS_KEY[:12]}, expected "
                 f"{self.module.KEY[:12]})")
-        kernels = native().CompiledDerivatives(module.API, self.parameter_vector)
+        kernels = native().CompiledDerivatives(module.API, self.parameter_vector,
+                                               self.info.quaternions())
         for name in DERIVATIVE_METHODS:
             setattr(self, name, getattr(kernels, name))
         self.derivative_module = module
@@ -112,3 +146,4 @@ class CompiledDynamics(Dynamics):
     forward_dynamics_derivatives.__doc__ = Dynamics.forward_dynamics_derivatives.__doc__
     coriolis_matrix.__doc__ = Dynamics.coriolis_matrix.__doc__
     linearize.__doc__ = Dynamics.linearize.__doc__
+

@@ -9,7 +9,8 @@ import numpy as np
 
 from ..errors import SingularMassMatrixError  # noqa: F401 (re-exported)
 from ..manifest import ModelInfo
-from .inputs import as_states, parameter_array
+from .frames import frame_index, frame_indices
+from .inputs import as_states, check_quaternions, parameter_array
 
 
 class Dynamics:
@@ -38,6 +39,16 @@ class Dynamics:
                 else (self._model_ref, False)
             model = self.__dict__["_model"] = resolve_model(ref, floating_base=floating_base)
         return model
+
+    @property
+    def source(self) -> str:
+        """Where the model was read from: its description's path as given to `gagen.load`
+        (for a given Model, the path it was read from), or a built-in's name. The viewer
+        finds the description's meshes from it."""
+        ref = self._model_ref[0] if isinstance(self._model_ref, tuple) else self._model_ref
+        if ref is None:
+            return self.info.source
+        return str(getattr(ref, "source", ref))
 
     @property
     def coordinates(self) -> list[str]:
@@ -104,17 +115,28 @@ class Dynamics:
     def integrate(self, q, v, dt=1.0) -> np.ndarray:
         """q ⊕ v·dt, as Pinocchio's `integrate(model, q, v * dt)`: a floating joint moves
         along the twist v (its origin's velocity and its angular velocity, in its body's
-        frame) held for dt, every other coordinate by v·dt. Shapes (nq,), (nv,) or stacked."""
-        from .manifold import integrate
+        frame) held for dt, every other coordinate by v·dt. Shapes (nq,), (nv,) or stacked;
+        dt a number."""
+        from .manifold import checked_step, integrate
 
-        return integrate(self.info, q, v, dt)
+        (q, v), _ = as_states(self._sizes[:2], q, v, names=("q", "v"))
+        check_quaternions(q, self._quaternions)
+        return integrate(self.info, q, checked_step(self.info, v, dt), 1.0)
 
     def difference(self, q0, q1) -> np.ndarray:
         """The velocity v, shape (nv,), with `integrate(q0, v) == q1` (Pinocchio's
         `difference`); stacked inputs give stacked outputs."""
         from .manifold import difference
 
+        (q0, q1), _ = as_states((self.nq, self.nq), q0, q1, names=("q0", "q1"))
+        check_quaternions(q0, self._quaternions, "q0")
+        check_quaternions(q1, self._quaternions, "q1")
         return difference(self.info, q0, q1)
+
+    @cached_property
+    def _quaternions(self) -> tuple[tuple[int, str], ...]:
+        """(first entry in q, description) of each floating joint's quaternion."""
+        return self.info.quaternions()
 
     def neutral(self) -> np.ndarray:
         """The configuration with every coordinate 0 and every quaternion the identity."""
@@ -134,26 +156,40 @@ class Dynamics:
         """(R, p): the frame's orientation (world components of its axes, (3, 3)) and its
         origin in the world (3,); stacked q gives (N, 3, 3) and (N, 3). `frame` is a name of
         `frames` or an index into it."""
-        from .frames import frame_index, pose
+        from .frames import pose
 
         X, F, _ = self._frame_data(q, p)
         return pose(self.info, X, F, frame_index(self.info, frame))
 
-    def frame_jacobian(self, q, frame, p=None) -> np.ndarray:
-        """The frame's Jacobian, (6, nv) or (N, 6, nv), in Pinocchio's LOCAL_WORLD_ALIGNED
-        convention: rows 0-2 map qd to the velocity of the frame's origin, rows 3-5 to its
-        angular velocity, both in world axes."""
-        from .frames import frame_index, jacobian
+    def frame_jacobian(self, q, frame, reference="local_world_aligned", p=None) -> np.ndarray:
+        """The frame's Jacobian, (6, nv) or (N, 6, nv): rows 0-2 map qd to the linear
+        velocity, rows 3-5 to the angular velocity, in `reference` (Pinocchio's):
+        "local_world_aligned" (the velocity of the frame's origin, world axes), "local"
+        (the same in the frame's axes) or "world" (the velocity of the point of the frame's
+        body at the world's origin, world axes). A list of frames gives their Jacobians,
+        (k, 6, nv) or (N, k, 6, nv), their common ancestors placed once."""
+        from .taskspace import jacobian, reference_code
 
+        code = reference_code(reference)
         X, F, _ = self._frame_data(q, p)
-        return jacobian(self.info, X, F, frame_index(self.info, frame), self.nv)
+        if isinstance(frame, (list, tuple)):
+            indices = frame_indices(self.info, frame)
+            if not indices:
+                return np.zeros(X.shape[:-1] + (0, 6, self.nv))
+            return np.stack([jacobian(self.info, X, F, k, self.nv, code) for k in indices],
+                            axis=-3)
+        return jacobian(self.info, X, F, frame_index(self.info, frame), self.nv, code)
 
-    def frame_velocity(self, q, qd, frame, p=None) -> np.ndarray:
-        """The frame's velocity, (6,) or (N, 6): its origin's linear velocity, then its
-        angular velocity, in world axes (= frame_jacobian(q, frame) @ qd)."""
+    def frame_velocity(self, q, qd, frame, reference="local_world_aligned", p=None
+                       ) -> np.ndarray:
+        """The frame's velocity, (6,) or (N, 6): linear, then angular, in `reference` (as
+        frame_jacobian's; = frame_jacobian(q, frame, reference) @ qd)."""
+        from .taskspace import reference_code, velocity
+
+        code = reference_code(reference)
         (q, qd), _ = as_states(self._sizes[:2], q, qd, names=("q", "qd"))
-        J = self.frame_jacobian(q, frame, p)
-        return np.einsum("...ij,...j->...i", J, qd)
+        X, F, _ = self._frame_data(q, p)
+        return velocity(self.info, X, F, frame_index(self.info, frame), qd, code)
 
     def _frame_data(self, q, p):
         """(placements X, frame offsets F, stacked?) at q (see gagen.runtime.frames)."""
@@ -166,6 +202,67 @@ class Dynamics:
     def _frame_offsets(self, p) -> np.ndarray:
         raise NotImplementedError
 
+    # --- task space: accelerations, Jacobians' time variation, operational-space inertia
+    # (gagen.runtime.taskspace has the conventions and the recursion) -----------------------
+
+    def frame_acceleration(self, q, qd, qdd, frame, reference="local_world_aligned",
+                           kind="classical", p=None) -> np.ndarray:
+        """The frame's acceleration at (q, qd, qdd), (6,) or (N, 6), linear then angular, in
+        `reference` (as frame_jacobian's). kind="classical": the acceleration of the point
+        of the frame's body at the reference's origin (Pinocchio's
+        getFrameClassicalAcceleration; in "local_world_aligned", the frame origin's
+        acceleration in world axes); kind="spatial": the rate of the velocity's components
+        in that reference (getFrameAcceleration). Both are J qdd + frame_bias_acceleration."""
+        from .taskspace import acceleration, kind_code, reference_code
+
+        codes = reference_code(reference), kind_code(kind)
+        (q, qd, qdd), _ = as_states(self._sizes, q, qd, qdd, names=("q", "qd", "qdd"))
+        X, F, _ = self._frame_data(q, p)
+        return acceleration(self.info, X, F, frame_index(self.info, frame), qd, qdd, *codes)
+
+    def frame_bias_acceleration(self, q, qd, frame, reference="local_world_aligned",
+                                kind="classical", p=None) -> np.ndarray:
+        """frame_acceleration at qdd = 0, (6,) or (N, 6): the drift of a task, J̇ qd in the
+        convention of `kind` (with kind="classical", the frame origin's acceleration that
+        the velocities alone cause)."""
+        from .taskspace import acceleration, kind_code, reference_code
+
+        codes = reference_code(reference), kind_code(kind)
+        (q, qd), _ = as_states(self._sizes[:2], q, qd, names=("q", "qd"))
+        X, F, _ = self._frame_data(q, p)
+        return acceleration(self.info, X, F, frame_index(self.info, frame), qd, None, *codes)
+
+    def frame_jacobian_time_variation(self, q, qd, frame, reference="local_world_aligned",
+                                      p=None) -> np.ndarray:
+        """J̇ = dJ/dt of frame_jacobian(q, frame, reference) along qd, (6, nv) or (N, 6, nv):
+        Pinocchio's getFrameJacobianTimeVariation. J̇ qd is the spatial acceleration at
+        qdd = 0 in "local" and "world", the classical one in "local_world_aligned"."""
+        from .taskspace import jacobian_time_variation, reference_code
+
+        code = reference_code(reference)
+        (q, qd), _ = as_states(self._sizes[:2], q, qd, names=("q", "qd"))
+        X, F, _ = self._frame_data(q, p)
+        return jacobian_time_variation(self.info, X, F, frame_index(self.info, frame), qd,
+                                       self.nv, code)
+
+    def delassus(self, q, frames, dims=6, p=None) -> np.ndarray:
+        """G = J M⁻¹ Jᵀ, (m, m) or (N, m, m), of the frames' stacked LOCAL_WORLD_ALIGNED
+        Jacobian rows (each frame's 6, or with dims=3 its linear 3; m = dims · frames): the
+        Delassus matrix of contacts at those frames. From M's factors; M is never inverted.
+        `frames` is one frame or a list. Raises as forward_dynamics for a singular M."""
+        from .taskspace import delassus
+
+        return delassus(self, q, frames, dims, p)
+
+    def operational_space_inertia(self, q, frames, dims=6, p=None) -> np.ndarray:
+        """Λ = (J M⁻¹ Jᵀ)⁻¹, (m, m) or (N, m, m), for the rows of `delassus(q, frames, dims)`:
+        the inertia the frames' tasks see (F = Λ ẍ + ...). SingularTaskError, naming the
+        frames, when the rows are dependent (a singular configuration, a frame welded to the
+        world, more rows than coordinates, or rows constraining the same motion)."""
+        from .taskspace import operational_space_inertia
+
+        return operational_space_inertia(self, q, frames, dims, p)
+
     def external_forces(self, q, fext, p=None) -> np.ndarray:
         """The generalised force, (nv,) or (N, nv), of external wrenches fext = {frame: w},
         w = (fx, fy, fz, tx, ty, tz) in world axes at the frame's origin ((6,) or one row
@@ -176,6 +273,75 @@ class Dynamics:
         X, F, stacked = self._frame_data(q, p)
         wrenches = external_wrenches(self.info, fext, X.shape[0] if stacked else None)
         return generalized_forces(self.info, X, F, wrenches, self.nv)
+
+    # --- centre of mass and centroidal dynamics (gagen.runtime.centroidal) ------------------
+    # Pinocchio's conventions (centerOfMass, ccrba, dccrba): 6-vectors and the rows of 6 x nv
+    # matrices are linear then angular, in world axes, about the centre of mass. The compiled
+    # backend binds its C kernels (centroidal.c) in their place.
+
+    def center_of_mass(self, q, p=None) -> np.ndarray:
+        """The centre of mass in the world: (3,), or (N, 3) for stacked q. The robot's mass
+        is its moving bodies' (a body welded to the world is left out, as in Pinocchio)."""
+        from . import centroidal
+
+        X, pi = self._centroidal_data(q, None, p)
+        return centroidal.center_of_mass(self.info, X, pi)
+
+    def com_velocity(self, q, qd, p=None) -> np.ndarray:
+        """The centre of mass's velocity in the world, (3,) or (N, 3): com_jacobian(q) @ qd."""
+        from . import centroidal
+
+        X, pi, qd = self._centroidal_data(q, qd, p)
+        return centroidal.com_velocity(self.info, X, pi, qd)
+
+    def com_jacobian(self, q, p=None) -> np.ndarray:
+        """J_com, (3, nv) or (N, 3, nv): com_velocity = J_com qd; the first three rows of
+        centroidal_map over the total mass (Pinocchio's jacobianCenterOfMass)."""
+        from . import centroidal
+
+        X, pi = self._centroidal_data(q, None, p)
+        return centroidal.com_jacobian(self.info, X, pi, self.nv)
+
+    def centroidal_map(self, q, p=None) -> np.ndarray:
+        """A_g, the centroidal momentum matrix, (6, nv) or (N, 6, nv): h_g = A_g qd, at the
+        centre of mass, world axes, linear rows first (Pinocchio's computeCentroidalMap)."""
+        from . import centroidal
+
+        X, pi = self._centroidal_data(q, None, p)
+        return centroidal.centroidal_map(self.info, X, pi, self.nv)
+
+    def centroidal_momentum(self, q, qd, p=None) -> np.ndarray:
+        """h_g, (6,) or (N, 6): the robot's linear momentum, then its angular momentum about
+        the centre of mass, world axes (Pinocchio's computeCentroidalMomentum)."""
+        from . import centroidal
+
+        X, pi, qd = self._centroidal_data(q, qd, p)
+        return centroidal.centroidal_momentum(self.info, X, pi, qd)
+
+    def centroidal_map_time_variation(self, q, qd, p=None) -> np.ndarray:
+        """d/dt A_g, (6, nv) or (N, 6, nv), along the velocity qd (Pinocchio's
+        computeCentroidalMapTimeVariation and dccrba's dAg)."""
+        from . import centroidal
+
+        X, pi, qd = self._centroidal_data(q, qd, p)
+        return centroidal.centroidal_map_time_variation(self.info, X, pi, qd, self.nv)
+
+    def centroidal_bias(self, q, qd, p=None) -> np.ndarray:
+        """d/dt A_g qd, (6,) or (N, 6): the rate of h_g at qdd = 0, so that d/dt h_g =
+        A_g qdd + centroidal_bias; by Newton and Euler, d/dt h_g is also m g plus the
+        external wrenches about the centre of mass (Pinocchio's dccrba's dAg @ v)."""
+        from . import centroidal
+
+        X, pi, qd = self._centroidal_data(q, qd, p)
+        return centroidal.centroidal_bias(self.info, X, pi, qd)
+
+    def _centroidal_data(self, q, qd, p):
+        """The placements and the regressor's parameters at q (and qd checked with it)."""
+        if qd is None:
+            (q,), _ = as_states(self.nq, q, names=("q",))
+            return self._placements(q, p), self.regressor_parameters(p)
+        (q, qd), _ = as_states(self._sizes[:2], q, qd, names=("q", "qd"))
+        return self._placements(q, p), self.regressor_parameters(p), qd
 
     # --- the dynamics (each backend implements these) --------------------------------------
 

@@ -42,6 +42,13 @@ def frame_index(info: ModelInfo, frame) -> int:
     raise KeyError(f"unknown frame {frame!r} (frames: {shown}; all in dyn.frames)")
 
 
+def frame_indices(info: ModelInfo, frames) -> list[int]:
+    """The indices of one frame or of a list (or tuple) of frames, by name or index."""
+    if isinstance(frames, (list, tuple)):
+        return [frame_index(info, frame) for frame in frames]
+    return [frame_index(info, frames)]
+
+
 def pose(info: ModelInfo, X: np.ndarray, F: np.ndarray, k: int
          ) -> tuple[np.ndarray, np.ndarray]:
     """(R, p) of frame k in the world, for placements X of shape (..., 15 nb)."""

@@ -1,12 +1,21 @@
 """The one set of input checks of the runtime, shared by both backends (the compiled
-module's slow path calls these too): states as float arrays of shape (n,) or (N, n), and
-parameters as a finite float array."""
+module's slow path calls these too): states as float arrays of shape (n,) or (N, n),
+parameters as a finite float array, and floating joints' quaternions that can be
+normalised in double precision."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 
 import numpy as np
+
+from ..errors import NonFiniteStateError
+
+# The smallest normal double: a quaternion's squared norm below it has lost its precision
+# (subnormal) or vanished, and 2 / |quat|^2, by which the kinematics scale the rotation,
+# overflows; above the largest double the squared norm is inf and the rotation would be
+# the identity. Either way the quaternion cannot be normalised as it is.
+SMALLEST_NORMAL = float(np.finfo(float).tiny)
 
 
 def as_float_array(a, name: str) -> np.ndarray:
@@ -76,3 +85,53 @@ def finite_parameters(values: np.ndarray) -> np.ndarray:
     if bad.size:
         raise ValueError(f"parameters must be finite; entry {int(bad[0])} is {values[bad[0]]}")
     return values
+
+
+def check_quaternions(q: np.ndarray, quaternions, name: str = "q") -> None:
+    """Refuse a floating joint's quaternion whose squared norm overflows (inf) or
+    underflows (below the smallest normal double): the rotation of such a quaternion
+    cannot be computed (an overflowing one would silently be the identity). A quaternion
+    holding NaN or inf is a NonFiniteStateError (the orientation alone may not show in
+    the mass matrix, so the dynamics' own NaN check would not see it). `quaternions`:
+    (first entry in q, description) of each, as `ModelInfo.quaternions()` gives them; q
+    is (nq,) or stacked (N, nq)."""
+    for offset, label in quaternions:
+        quat = q[..., offset: offset + 4]
+        with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+            norm2 = np.sum(quat * quat, axis=-1)
+        bad = ~((norm2 >= SMALLEST_NORMAL) & (norm2 < np.inf))
+        if np.any(bad):
+            row = int(np.flatnonzero(np.atleast_1d(bad))[0]) if q.ndim == 2 else -1
+            raise quaternion_error(name, label, row, quat[row] if row >= 0 else quat)
+
+
+def quaternion_error(name: str, label: str, row: int, quat) -> ValueError:
+    """The one-line error for a quaternion that cannot be normalised (check_quaternions;
+    the compiled runtime raises the same)."""
+    quat = np.asarray(quat, dtype=float)
+    where = f" (stacked input, row {row})" if row >= 0 else ""
+    label = label.replace("q[", f"{name}[", 1) if name != "q" else label
+    if not np.isfinite(quat).all():
+        return NonFiniteStateError(f"{label} holds NaN or inf{where}")
+    largest = float(np.abs(quat).max())
+    with np.errstate(over="ignore", under="ignore"):
+        overflows = not np.isfinite(np.sum(quat * quat))
+    what = (f"its squared norm overflows (an entry of {largest:.3g})" if overflows else
+            "it is zero" if largest == 0 else
+            f"its squared norm underflows (entries of at most {largest:.3g})")
+    return ValueError(f"{label} cannot be normalised in double precision{where}: {what}; "
+                      "give it at a scale near 1, e.g. (0, 0, 0, 1) for no rotation")
+
+
+def nonfinite_cause(q) -> str:
+    """Why the dynamics at q came out NaN or inf: q holds NaN or inf, or, q being finite,
+    a product of its entries and the parameters overflowed."""
+    if q is None:
+        return "q holds NaN or inf"
+    q = np.asarray(q, dtype=float)
+    if not np.isfinite(q).all():
+        k = int(np.flatnonzero(~np.isfinite(q))[0])
+        return f"q holds NaN or inf (q[{k}] is {q[k]})"
+    return (f"q is finite (largest |entry| {np.abs(q).max():.3g}), so a product of the "
+            "parameters and q's entries overflowed: check the scale of the parameters (p=) "
+            "and of q")

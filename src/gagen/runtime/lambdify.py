@@ -15,6 +15,7 @@ from ..symbolic.derivatives import DerivativeEquations, derive_derivatives
 from ..symbolic.differentiate import needed_definitions
 from ..symbolic.gibbs_appell import Equations
 from .dynamics import Dynamics, SingularMassMatrixError, as_states
+from .inputs import check_quaternions, nonfinite_cause
 
 log = logging.getLogger(__name__)
 
@@ -72,6 +73,7 @@ class LambdifyDynamics(Dynamics):
                            cse=lambda expressions: (definitions, expressions))
 
     def _call(self, fn, states, p, stacked):
+        check_quaternions(states[0], self._quaternions)  # every kernel's first state is q
         pv = self.parameter_vector(p)
         columns = [col for s in states for col in (s.T if stacked else s)]
         values = fn(*columns, *pv)
@@ -94,8 +96,9 @@ class LambdifyDynamics(Dynamics):
 
     def forward_dynamics(self, q, qd, tau, p=None, fext=None) -> np.ndarray:
         if fext is not None:
-            tau = np.asarray(tau, dtype=float) + self.external_forces(q, fext, p)
-        L = _cholesky(self.mass_matrix(q, p))
+            (q, tau), _ = as_states(self._sizes[::2], q, tau, names=("q", "tau"))
+            tau = tau + self.external_forces(q, fext, p)
+        L = _cholesky(self.mass_matrix(q, p), q)
         return _cholesky_solve(L, self.forcing(q, qd, tau, p)[..., None])[..., 0]
 
     def inverse_dynamics(self, q, qd, qdd, p=None, fext=None) -> np.ndarray:
@@ -155,7 +158,7 @@ class LambdifyDynamics(Dynamics):
     def forward_dynamics_derivatives(self, q, qd, tau, p=None) -> tuple:
         (q, qd, tau), _ = as_states(self._sizes, q, qd, tau, names=("q", "qd", "tau"))
         p = self.parameter_vector(p)
-        L = _cholesky(self.mass_matrix(q, p))
+        L = _cholesky(self.mass_matrix(q, p), q)
         qdd = _cholesky_solve(L, self.forcing(q, qd, tau, p)[..., None])[..., 0]
         dtau_dq, dtau_dqd = self.inverse_dynamics_derivatives(q, qd, qdd, p)
         M_inv = _cholesky_solve(L, np.broadcast_to(np.eye(self.n), L.shape))
@@ -172,11 +175,14 @@ class LambdifyDynamics(Dynamics):
         return np.array(self._pi(*self.parameter_vector(p)), dtype=float)
 
 
-def _cholesky(M: np.ndarray) -> np.ndarray:
+def _cholesky(M: np.ndarray, q=None) -> np.ndarray:
     """The lower Cholesky factor of M (or of each stacked M), with the runtime's errors."""
     if not np.isfinite(M).all():  # LAPACK may pass NaN through instead of failing
+        if q is not None and np.ndim(q) == 2:
+            row = int(np.flatnonzero(~np.isfinite(M.reshape(len(M), -1)).all(axis=1))[0])
+            q = np.asarray(q)[row]
         raise NonFiniteStateError(
-            "the mass matrix is NaN or inf at this state: q holds NaN or inf")
+            f"the mass matrix is NaN or inf at this state: {nonfinite_cause(q)}")
     try:
         return np.linalg.cholesky(M)
     except np.linalg.LinAlgError:

@@ -98,7 +98,8 @@ def _exp_coefficients(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     t = np.where(small, 1.0, theta)
     t2 = theta * theta
     a = np.where(small, 1 - t2 / 6 + t2 * t2 / 120, np.sin(t) / t)
-    b = np.where(small, 0.5 - t2 / 24 + t2 * t2 / 720, (1 - np.cos(t)) / (t * t))
+    # 1 - cos t as 2 sin^2(t/2): no cancellation (at t = 1e-3, 1 - cos t keeps 6 digits)
+    b = np.where(small, 0.5 - t2 / 24 + t2 * t2 / 720, 2 * (np.sin(t / 2) / t) ** 2)
     c = np.where(small, 1 / 6 - t2 / 120 + t2 * t2 / 5040, (t - np.sin(t)) / (t * t * t))
     return a, b, c
 
@@ -116,30 +117,36 @@ def exp6(nu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return R, (V @ v[..., None])[..., 0]
 
 
-def log6(R: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """SE(3)'s logarithm: the twist (linear, angular) whose exponential is (R, p)."""
-    cos = np.clip((np.trace(R, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0)
-    theta = np.arccos(cos)
+def log_quaternion(quaternion: np.ndarray) -> np.ndarray:
+    """The rotation vectors w (|w| <= pi) of quaternions (..., 4) as (x, y, z, w).
+
+    w = 2 atan2(|v|, s) v / |v| for the unit quaternion (v, s) taken with s >= 0 (q and -q
+    are one rotation). atan2 keeps every digit at both ends, where the angle from a
+    rotation matrix's trace (arccos) loses half of them: near a half turn, whose axis then
+    comes from v itself (exact at s = 0, where the matrix is symmetric and tells the axis
+    only up to the signs of its entries), and near no turn."""
+    q = np.asarray(quaternion, dtype=float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    q = np.where(q[..., 3:] < 0, -q, q)
+    v, s = q[..., :3], q[..., 3]
+    norm = np.linalg.norm(v, axis=-1)
+    small = norm < 1e-4  # then s > 0.99999999: 2 atan(x) / x by its series in x = |v| / s
+    x2 = (norm / np.where(small, s, 1.0)) ** 2
+    factor = np.where(small, 2 / np.where(small, s, 1.0) * (1 - x2 / 3 + x2 * x2 / 5),
+                      2 * np.arctan2(norm, s) / np.where(small, 1.0, norm))
+    return factor[..., None] * v
+
+
+def log6(w: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """SE(3)'s logarithm: the twist (linear, angular) whose exponential is the rotation of
+    rotation vector w (`log_quaternion`) with translation p."""
+    theta = np.linalg.norm(w, axis=-1)
     small = theta < 1e-4
-    sin = np.sin(theta)
-    # w = theta / (2 sin theta) vee(R - R^T); near pi, from the symmetric part
-    vee = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0],
-                    R[..., 1, 0] - R[..., 0, 1]], axis=-1)
-    factor = np.where(small, 0.5 + theta ** 2 / 12,
-                      theta / (2 * np.where(np.abs(sin) < 1e-12, 1.0, sin)))
-    w = factor[..., None] * vee
-    near_pi = theta > np.pi - 1e-6
-    if np.any(near_pi):
-        B = (R[near_pi] + np.eye(3)) / 2
-        axis = np.sqrt(np.clip(np.diagonal(B, axis1=-2, axis2=-1), 0, None))
-        signs = np.sign(vee[near_pi])
-        signs[signs == 0] = 1
-        w[near_pi] = axis * signs * theta[near_pi][..., None]
-    a, b, _ = _exp_coefficients(theta)
     W = _hat(w)
-    # V^-1 = I - W/2 + (1/t^2)(1 - a/(2b)) W^2
-    t2 = np.where(small, 1.0, theta * theta)
-    d = np.where(small, 1 / 12 + theta ** 2 / 720, (1 - a / (2 * b)) / t2)
+    # V^-1 = I - W/2 + d W^2, d = (1 - a/(2b)) / t^2 = (1 - (t/2) cot(t/2)) / t^2: written
+    # with the cotangent, 1 - ... loses only the digits of d that W^2 (of size t^2) drops
+    t = np.where(small, 1.0, theta)
+    d = np.where(small, 1 / 12 + theta ** 2 / 720, (1 - t / 2 / np.tan(t / 2)) / (t * t))
     Vinv = np.eye(3) - W / 2 + d[..., None, None] * (W @ W)
     return np.concatenate([(Vinv @ p[..., None])[..., 0], w], axis=-1)
 
@@ -163,6 +170,27 @@ def configuration_rate(info, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         out[..., iq + 5] = 0.5 * (s * c + x * b - y * a) + pull * z
         out[..., iq + 6] = -0.5 * (x * a + y * b + z * c) + pull * s
     return out
+
+
+def checked_step(info, v: np.ndarray, dt) -> np.ndarray:
+    """v * dt, refused (ValueError) unless dt is a finite number and the step is finite with
+    each floating joint's rotation vector of a finite norm (a norm that overflows leaves no
+    angle to turn by)."""
+    if isinstance(dt, (bool, str, bytes)) or np.ndim(dt) != 0:
+        raise TypeError(f"dt must be a number, got {type(dt).__name__}")
+    dt = float(dt)
+    if not np.isfinite(dt):
+        raise ValueError(f"dt must be finite, got {dt}")
+    with np.errstate(over="ignore"):
+        step = np.asarray(v, dtype=float) * dt
+        if not np.isfinite(step).all():
+            raise ValueError("v * dt overflows: it must be finite")
+        for _, iv in floating_slices(info):
+            w = step[..., iv + 3: iv + 6]
+            if not np.isfinite(np.sum(w * w, axis=-1)).all():
+                raise ValueError(f"v[{iv + 3}:{iv + 6}] * dt, a floating joint's rotation "
+                                 "vector, has a norm that overflows")
+    return step
 
 
 def integrate(info, q, v, dt=1.0) -> np.ndarray:
@@ -209,10 +237,13 @@ def difference(info, q0, q1) -> np.ndarray:
     plain_q, plain_v = plain_entries(info)
     out[..., plain_v] = q1[..., plain_q] - q0[..., plain_q]
     for iq, iv in floating_slices(info):
-        R0, R1 = rotation(q0[..., iq + 3: iq + 7]), rotation(q1[..., iq + 3: iq + 7])
-        R0T = np.swapaxes(R0, -1, -2)
+        quat0, quat1 = q0[..., iq + 3: iq + 7], q1[..., iq + 3: iq + 7]
+        R0T = np.swapaxes(rotation(quat0), -1, -2)
         dp = (R0T @ (q1[..., iq: iq + 3] - q0[..., iq: iq + 3])[..., None])[..., 0]
-        out[..., iv: iv + 6] = log6(R0T @ R1, dp)
+        # the relative rotation as a quaternion, conj(quat0) ⊗ quat1, not as R0^T R1: its
+        # angle keeps every digit near a half turn (log_quaternion)
+        relative = _multiply(quat0 * [-1.0, -1.0, -1.0, 1.0], quat1)
+        out[..., iv: iv + 6] = log6(log_quaternion(relative), dp)
     return out
 
 
@@ -239,9 +270,25 @@ def neutral(info) -> np.ndarray:
 
 
 def normalized(info, q) -> np.ndarray:
-    """q with each floating joint's quaternion scaled to unit norm (a fresh array)."""
+    """q with each floating joint's quaternion scaled to unit norm (a fresh array; see
+    `unit_quaternion` for quaternions whose squared norm overflows, zero or NaN ones)."""
     q = np.array(q, dtype=float)
     for iq, _ in floating_slices(info):
-        quat = q[..., iq + 3: iq + 7]
-        q[..., iq + 3: iq + 7] = quat / np.linalg.norm(quat, axis=-1, keepdims=True)
+        q[..., iq + 3: iq + 7] = unit_quaternion(q[..., iq + 3: iq + 7])
     return q
+
+
+def unit_quaternion(quat: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) divided by their norms, without a NumPy warning: one whose
+    squared norm overflows or underflows (the last samples of a diverging simulation) is
+    scaled by its largest entry first, and one that is zero or holds NaN or inf becomes
+    NaN (its simulation's status says why)."""
+    with np.errstate(over="ignore"):
+        norm = np.linalg.norm(quat, axis=-1, keepdims=True)
+    fine = np.isfinite(norm) & (norm > 0)
+    if fine.all():
+        return quat / norm  # the usual case, one division
+    with np.errstate(all="ignore"):
+        scaled = quat / np.max(np.abs(quat), axis=-1, keepdims=True)  # NaN: zero, inf, NaN
+        scaled /= np.linalg.norm(scaled, axis=-1, keepdims=True)
+        return np.where(fine, quat / norm, scaled)

@@ -31,8 +31,10 @@ from .simulate import (
     _vector,
     checked_tolerances,
     compiled_settings,
+    constant_wrenches,
     controller_spec,
     initial_configuration,
+    nonfinite_origin,
     status_error,
     unit_quaternions,
 )
@@ -41,6 +43,8 @@ from .simulate import (
 STATUS, NFEV, NSTEPS, NACCEPTED, NREJECTED = range(5)
 # A run of a Dask chunk that failed on its worker after its retries (not a C status).
 STATUS_CHUNK_FAILED = -201
+# Failed runs whose NaN is traced to its origin (nonfinite_origin: a few dynamics calls each)
+DIAGNOSED_RUNS = 1000
 # How often the waiting thread reports progress and notices Ctrl-C, in seconds.
 _WAIT_SECONDS = 0.1
 Progress = Callable[[int, int], None]
@@ -54,9 +58,10 @@ class BatchPlan:
     """The runs of a batch, checked, as the C batch reads them (picklable: a Dask chunk
     is the plan of some of its rows).
 
-    y0 (N, 2n): each run's (q0, qd0); p (N or 1, P); control: the controllers' tables
+    y0 (N, nq + nv): each run's (q0, qd0); p (N or 1, P); control: the controllers' tables
     (kind, gravity_compensation, kp, kd, target, traj_q0, traj_qf, traj_Tp), N or 1 rows;
-    offset: the index of the first run in the whole batch.
+    offset: the index of the first run in the whole batch; wrenches: the constant external
+    wrenches every run shares, (frame numbers (k,), wrenches (k, 6)), or None.
     """
 
     settings: CompiledSettings
@@ -64,6 +69,7 @@ class BatchPlan:
     p: np.ndarray
     control: dict[str, np.ndarray]
     offset: int = 0
+    wrenches: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def runs(self) -> int:
@@ -75,14 +81,16 @@ class BatchPlan:
             return a if a.shape[0] == 1 else a[start:stop]
 
         return BatchPlan(self.settings, self.y0[start:stop], pick(self.p),
-                         {k: pick(v) for k, v in self.control.items()}, self.offset + start)
+                         {k: pick(v) for k, v in self.control.items()}, self.offset + start,
+                         self.wrenches)
 
 
 _CONTROL_VECTORS = ("kp", "kd", "target", "traj_q0", "traj_qf")
 
 
 def prepare_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: str = "dopri5",
-                  rtol: float = 1e-6, atol=1e-8, t_eval=None, **options) -> BatchPlan:
+                  rtol: float = 1e-6, atol=1e-8, t_eval=None, fext=None,
+                  **options) -> BatchPlan:
     """Check a batch's inputs (the checks of `gagen.simulate`, per run) into a `BatchPlan`."""
     n, nq = dyn.nv, dyn.nq
     t0, t1 = _pair(t_span)
@@ -103,7 +111,8 @@ def prepare_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: st
     specs = ([controller_spec(controller, method, n, "simulate_batch", dyn)]
              if controllers is None
              else [controller_spec(c, method, n, "simulate_batch", dyn) for c in controllers])
-    return BatchPlan(settings, y0, table, _control_tables(specs, n, nq))
+    return BatchPlan(settings, y0, table, _control_tables(specs, n, nq),
+                     wrenches=constant_wrenches(dyn, fext))
 
 
 def _controller_list(controller) -> list | None:
@@ -235,10 +244,12 @@ def run_plan(dyn, plan: BatchPlan, threads: int = 1, progress: Progress | None =
     qd, tau = (np.empty((runs, m, n)) for _ in range(2))
     stats = np.zeros((runs, 5), np.int64)
     c = plan.control
+    frames, wrenches = plan.wrenches if plan.wrenches is not None else (None, None)
     batch = native().CompiledBatch(
         dyn.kernels, s.method, s.t0, s.t1, s.t_eval, s.rtol, s.atol, s.first_step, s.max_step,
         s.max_steps, s.h, plan.y0, plan.p, c["kind"], c["gravity_compensation"], c["kp"],
-        c["kd"], c["target"], c["traj_q0"], c["traj_qf"], c["traj_Tp"], q, qd, tau, stats)
+        c["kd"], c["target"], c["traj_q0"], c["traj_qf"], c["traj_Tp"], q, qd, tau, stats,
+        frames=frames, wrenches=wrenches)
     _run_on_threads(batch, runs, threads, progress)
     return unit_quaternions(dyn, q.reshape(-1, dyn.nq)).reshape(q.shape), qd, tau, stats
 
@@ -317,6 +328,9 @@ class BatchResult:
     rejected: np.ndarray
     coordinates: list[str]
     stats: dict = field(default_factory=dict)
+    # the dynamics object and the parameter table (N or 1 rows) of the runs
+    dyn: object = field(default=None, repr=False, compare=False)
+    p: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.status)
@@ -331,8 +345,32 @@ class BatchResult:
         stats = {"method": self.stats.get("method"), "backend": self.stats.get("backend"),
                  "nfev": int(self.nfev[i]), "steps": int(self.steps[i]),
                  "rejected": int(self.rejected[i]), "message": self.message[i]}
+        nq = self.q.shape[-1]
         return SimulationResult(self.t.copy(), np.array(self.q[i]), np.array(self.qd[i]),
-                                np.array(self.tau[i]), list(self.coordinates), stats)
+                                np.array(self.tau[i]), list(self.coordinates), stats,
+                                None if nq == len(self.coordinates) else
+                                list(getattr(self.dyn, "configuration", [])) or None,
+                                dyn=self.dyn, p=self._parameters(i))
+
+    def _parameters(self, i: int) -> np.ndarray | None:
+        if self.p is None:
+            return None
+        return np.array(self.p[0 if self.p.shape[0] == 1 else i])
+
+    def to_html(self, path, runs=None, mode: str = "overlay", package_dirs=None):
+        """One self-contained HTML file that plays chosen runs back in 3-D (needs
+        `pip install gagen[viewer]`): `runs` (indices; default the first 10 that reached
+        the end) drawn together, the first opaque and the others ghosted (`mode="overlay"`),
+        or one after the other, labelled (`mode="sequence"`). Each run is placed with its
+        own parameters. Returns the path (gagen.viewer.write_html)."""
+        if self.dyn is None:
+            raise ValueError("this batch has no dynamics object (dyn)")
+        chosen = chosen_runs(self.ok, runs)
+        from ..viewer import write_html
+
+        return write_html(path, self.dyn, self.t, self.q[chosen],
+                          [self._parameters(i) for i in chosen], package_dirs=package_dirs,
+                          mode=mode, labels=[f"run {i}" for i in chosen])
 
     def __repr__(self) -> str:
         return (f"<BatchResult {len(self)} runs ({int((~self.ok).sum())} failed), "
@@ -347,20 +385,58 @@ def batch_result(dyn, plan: BatchPlan, q, qd, tau, stats: np.ndarray,
     s = plan.settings
     status = stats[:, STATUS].astype(np.int32)
     message = [SUCCESS_MESSAGE] * len(status)
+    diagnosed = 0
     for i in np.flatnonzero(status):
+        origin = None
+        if status[i] in (2, -105) and diagnosed < DIAGNOSED_RUNS:
+            origin = _nonfinite_origin(dyn, plan, int(i))
+            diagnosed += 1
         message[i] = (failures or {}).get(int(i)) or str(
-            status_error(int(status[i]), s.method, s.t_eval, np.asarray(q[i]), dyn.info.name))
+            status_error(int(status[i]), s.method, s.t_eval, np.asarray(q[i]), dyn.info.name,
+                         origin))
     return BatchResult(s.t_eval.copy(), q, qd, tau, status, message,
                        stats[:, NFEV].copy(), stats[:, NACCEPTED].copy(),
                        stats[:, NREJECTED].copy(), list(dyn.coordinates),
                        {"method": s.method, "backend": dyn.backend, "runs": len(status),
-                        "failed": int(np.count_nonzero(status))})
+                        "failed": int(np.count_nonzero(status))}, dyn=dyn, p=plan.p)
+
+
+HTML_RUNS = 10  # runs a batch's HTML file shows by default
+
+
+def chosen_runs(ok: np.ndarray, runs=None) -> list[int]:
+    """The runs to draw: `runs` (indices, each of a run that reached the end), or the first
+    HTML_RUNS that did."""
+    if runs is None:
+        chosen = [int(i) for i in np.flatnonzero(ok)[:HTML_RUNS]]
+        if not chosen:
+            raise ValueError("no run reached the end: nothing to draw")
+        return chosen
+    chosen = [int(i) for i in np.atleast_1d(runs)]
+    for i in chosen:
+        if not 0 <= i < len(ok):
+            raise ValueError(f"run {i} is not one of the {len(ok)} runs")
+        if not ok[i]:
+            raise ValueError(f"run {i} did not reach the end (its samples stop): choose "
+                             "another")
+    if not chosen:
+        raise ValueError("runs is empty")
+    return chosen
+
+
+def _nonfinite_origin(dyn, plan: BatchPlan, i: int) -> str | None:
+    """Where run i's NaN or inf came from, when its initial state is the cause."""
+    nq = dyn.nq
+    p = plan.p[i if plan.p.shape[0] > 1 else 0]
+    fext = None if plan.wrenches is None else dict(zip(plan.wrenches[0].tolist(),
+                                                       plan.wrenches[1]))
+    return nonfinite_origin(dyn, plan.y0[i, :nq], plan.y0[i, nq:], p, fext=fext)
 
 
 def simulate_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: str = "dopri5",
                    rtol: float = 1e-6, atol=1e-8, t_eval=None, threads: int | None = None,
                    client=None, *, progress: Progress | None = None,
-                   chunk_size: int | None = None, retries: int = 2,
+                   chunk_size: int | None = None, retries: int = 2, fext=None,
                    **options) -> BatchResult:
     """Run N simulations of `dyn` at once, in C, on every core or on a Dask cluster.
 
@@ -380,6 +456,8 @@ def simulate_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: s
                 10,000 runs); a failing chunk is retried `retries` times, and if it still
                 fails its runs get status -201 and the others are kept.
     progress    called as progress(done, N) while the runs go on.
+    fext        constant wrenches on frames, {frame: (fx, fy, fz, tx, ty, tz)} in world
+                axes at the frames' origins, the same for every run (as in `simulate`).
     options     dopri5: first_step, max_step, max_steps; rk4: h, max_steps.
 
     Every run gives exactly the numbers `gagen.simulate(..., method=method)` gives for the
@@ -387,7 +465,7 @@ def simulate_batch(dyn, t_span, q0, qd0=None, controller=None, p=None, method: s
     Ctrl-C stops every thread and raises KeyboardInterrupt. Returns a `BatchResult`.
     """
     plan = prepare_batch(dyn, t_span, q0, qd0, controller, p, method, rtol, atol, t_eval,
-                         **options)
+                         fext, **options)
     return run_batch(dyn, plan, threads=threads, client=client, progress=progress,
                      chunk_size=chunk_size, retries=retries)
 

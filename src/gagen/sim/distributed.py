@@ -101,8 +101,10 @@ def run_on_cluster(client, dyn, plan: BatchPlan, chunk_size: int | None = None,
     size = default_chunk_size(client, plan.runs) if chunk_size is None else int(chunk_size)
     if size < 1:
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
-    runs, m, n = plan.runs, plan.settings.t_eval.size, plan.y0.shape[1] // 2
-    q, qd, tau = (np.empty((runs, m, n)) for _ in range(3))
+    # q has nq entries, qd and tau nv: they differ where a joint floats (a quaternion)
+    runs, m, nq, nv = plan.runs, plan.settings.t_eval.size, dyn.nq, dyn.nv
+    q = np.empty((runs, m, nq))
+    qd, tau = (np.empty((runs, m, nv)) for _ in range(2))
     stats = np.zeros((runs, 5), np.int64)
     failures: dict[int, str] = {}
     # a key of its own per batch (hash=False): a content-hashed key could be the one a

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..csvtext import text_cell
 from ..errors import NonFiniteStateError, SingularMassMatrixError
 from ..manifest import FRICTION_WIDTH
 from ..runtime.compiled import native
@@ -72,6 +73,10 @@ class SimulationResult:
     coordinates: list[str]
     stats: dict = field(default_factory=dict)
     configuration: list[str] | None = None  # the names of q's entries, if not coordinates
+    # the dynamics object and parameter vector of the run (set by gagen.simulate), which
+    # to_html draws the robot with
+    dyn: object = field(default=None, repr=False, compare=False)
+    p: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def n(self) -> int:
@@ -84,15 +89,29 @@ class SimulationResult:
                 + [f"tau_{name}" for name in c])
 
     def to_csv(self, path) -> Path:
-        """Write t, q, qd, tau (one row per sample, SI units, radians) to a CSV file."""
+        """Write t, q, qd, tau (one row per sample, SI units, radians) to a CSV file; a
+        name that a spreadsheet would take for a formula is escaped (gagen.csvtext)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         data = np.column_stack([self.t, self.q, self.qd, self.tau])
         with path.open("w", newline="") as fh:
             writer = csv.writer(fh)
-            writer.writerow(self.columns())
+            writer.writerow([text_cell(name) for name in self.columns()])
             writer.writerows([repr(float(v)) for v in row] for row in data)
         return path
+
+    def to_html(self, path, package_dirs=None) -> Path:
+        """Write one self-contained HTML file that plays the run back in 3-D: the robot with
+        its meshes (a URDF's, found through `package_dirs` and $ROS_PACKAGE_PATH; MJCF
+        geoms; inertia boxes for models without), a time slider, play/pause and speed.
+        It plays offline in any current browser and fetches nothing. Needs
+        `pip install gagen[viewer]` (gagen.viewer.write_html). Returns the path."""
+        if self.dyn is None:
+            raise ValueError("this result has no dynamics object (dyn): made by hand? "
+                             "gagen.viewer.write_html(path, dyn, t, q) draws any run")
+        from ..viewer import write_html
+
+        return write_html(path, self.dyn, self.t, self.q, self.p, package_dirs=package_dirs)
 
     def __repr__(self) -> str:
         return (f"<SimulationResult {len(self.t)} samples, t in [{self.t[0]:g}, {self.t[-1]:g}], "
@@ -229,10 +248,13 @@ def simulate(dyn, t_span, q0, qd0=None, controller=None, method: str = "RK45",
                         "(t, q, qd) -> tau")
     wrenches = constant_wrenches(dyn, fext)
     if isinstance(method, str) and method in COMPILED_METHODS:
-        return _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol_arr,
-                                  t_eval, pvec, options, wrenches)
-    return _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol_arr, t_eval,
-                           pvec, options, wrenches)
+        result = _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol_arr,
+                                    t_eval, pvec, options, wrenches)
+    else:
+        result = _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol_arr,
+                                 t_eval, pvec, options, wrenches)
+    result.dyn, result.p = dyn, pvec
+    return result
 
 
 def constant_wrenches(dyn, fext) -> tuple[np.ndarray, np.ndarray] | None:
@@ -247,15 +269,14 @@ def constant_wrenches(dyn, fext) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def initial_configuration(dyn, q0: np.ndarray) -> np.ndarray:
-    """q0, with each floating joint's quaternion normalised (ValueError for a zero one)."""
+    """q0, with each floating joint's quaternion normalised (ValueError for one that cannot
+    be: zero, or with a squared norm that overflows or underflows)."""
     if dyn.nq == dyn.nv:
         return q0
-    from ..runtime.manifold import floating_slices, normalized
+    from ..runtime.inputs import check_quaternions
+    from ..runtime.manifold import normalized
 
-    for iq, _ in floating_slices(dyn.info):
-        if not np.linalg.norm(q0[iq + 3: iq + 7]) > 1e-12:
-            raise ValueError(f"q0's quaternion {dyn.configuration[iq + 3: iq + 7]} is zero: "
-                             "the identity is (0, 0, 0, 1)")
+    check_quaternions(q0, dyn.info.quaternions(), "q0")
     return normalized(dyn.info, q0)
 
 
@@ -328,7 +349,10 @@ def _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval
     fext = None if wrenches is None else dict(zip(wrenches[0].tolist(), wrenches[1]))
     smoothing = smooth_friction(dyn, pvec)
 
+    reached = [t0]  # the last time the right-hand side was evaluated at
+
     def rhs(t, y):
+        reached[0] = t
         q = y[:nq]
         qd = y[nq:]
         tau = zero if law is None else law(t, q, qd)
@@ -344,8 +368,23 @@ def _simulate_scipy(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_eval
         y = np.tile(y0, (t.size, 1))
         sol = _EmptySpan(t.size)
     else:
-        sol = solve_ivp(rhs, (t0, t1), y0, method=method, t_eval=te, rtol=rtol, atol=atol,
-                        dense_output=True, **options)
+        try:
+            sol = solve_ivp(rhs, (t0, t1), y0, method=method, t_eval=te, rtol=rtol,
+                            atol=atol, dense_output=True, **options)
+        except NonFiniteStateError:
+            tau0 = None
+            if law is not None:
+                with np.errstate(all="ignore"):
+                    try:
+                        tau0 = np.asarray(law(t0, q0, qd0), dtype=float)
+                    except NonFiniteStateError as exc:
+                        raise NonFiniteStateError(f"{name} failed at the initial state: "
+                                                  f"{exc}") from None
+            origin = nonfinite_origin(dyn, q0, qd0, pvec, tau0, fext)
+            if origin is None:
+                raise NonFiniteStateError(f"{name} failed at t = {reached[0]:g}: "
+                                          f"{_NONFINITE}") from None
+            raise NonFiniteStateError(f"{name} failed at the initial state: {origin}") from None
         if sol.status < 0:
             raise RuntimeError(f"{name} failed: {sol.message} (at t = {sol.t[-1]:g} of "
                                f"[{t0:g}, {t1:g}])")
@@ -519,7 +558,12 @@ def _simulate_compiled(dyn, t0, t1, q0, qd0, controller, method, rtol, atol, t_e
     q = unit_quaternions(dyn, q)
     te = settings.t_eval
     if status != 0:
-        raise status_error(status, method, te, q, dyn.info.name)
+        origin = None
+        if status in (2, -105):
+            tau0 = sim.torques(np.array([t0]), np.concatenate((q0, qd0))[None, :])[0][0]
+            fext = None if wrenches is None else dict(zip(wrenches[0].tolist(), wrenches[1]))
+            origin = nonfinite_origin(dyn, q0, qd0, pvec, tau0, fext)
+        raise status_error(status, method, te, q, dyn.info.name, origin)
     wall = time.perf_counter() - start
     stats = {"method": method, "backend": dyn.backend, "nfev": info["nfev"],
              "steps": info["naccepted"],
@@ -545,11 +589,55 @@ def _name(controller) -> str | None:
     return getattr(controller, "__name__", None) or type(controller).__name__
 
 
-def status_error(status: int, method: str, te, q, model_name: str) -> Exception:
+def nonfinite_origin(dyn, q0, qd0, p, tau0=None, fext=None) -> str | None:
+    """What is not finite at a simulation's initial state, and which entry made it so: the
+    controller's first torques, the mass matrix at q0, the external wrenches' forces, or the
+    velocity and gravity terms (the entry of q0 or qd0 whose products overflow); None when
+    the initial state is sound (the motion diverged later)."""
+    q0, qd0 = np.asarray(q0, dtype=float), np.asarray(qd0, dtype=float)
+    zero = np.zeros(dyn.nv)
+    with np.errstate(all="ignore"):
+        if tau0 is not None and not np.isfinite(tau0).all():
+            return ("the controller's torques at the initial state are not finite ("
+                    + _largest(np.where(np.isfinite(tau0), 0.0, np.inf), "tau", dyn.coordinates)
+                    + "): check its gains and target")
+        try:
+            mass = dyn.mass_matrix(q0, p)
+            forces = None if not fext else dyn.external_forces(q0, fext, p)
+            still = dyn.forcing(q0, zero, zero if tau0 is None else tau0, p)
+            moving = dyn.forcing(q0, qd0, zero if tau0 is None else tau0, p)
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError):
+            return None
+    if not np.isfinite(mass).all():
+        return ("the mass matrix at the initial q0 is not finite: "
+                + _largest(q0, "q0", dyn.configuration) + " is too large for its products")
+    if forces is not None and not np.isfinite(forces).all():
+        return "the external wrenches' joint forces at the initial q0 are not finite"
+    if not np.isfinite(still).all():
+        return ("the gravity and position terms at the initial q0 are not finite: "
+                + _largest(q0, "q0", dyn.configuration) + " is too large for their products")
+    if not np.isfinite(moving).all():
+        return ("the velocity terms at the initial qd0 are not finite: "
+                + _largest(qd0, "qd0", dyn.coordinates) + " is too large for their products "
+                "(its square overflows)")
+    return None
+
+
+def _largest(values: np.ndarray, name: str, names: list[str]) -> str:
+    """'qd0[2] (q3) = 1e+200': the entry of largest magnitude."""
+    k = int(np.argmax(np.abs(values)))
+    return f"{name}[{k}] ({names[k]}) = {values[k]:.3g}"
+
+
+def status_error(status: int, method: str, te, q, model_name: str,
+                 origin: str | None = None) -> Exception:
     """The exception for a compiled integration's nonzero status, saying where it stopped
-    (q holds NaN in the rows not reached)."""
+    (q holds NaN in the rows not reached) and, for NaN or inf, where it came from when the
+    initial state was the cause (`origin`, from nonfinite_origin)."""
     reached = ~np.isnan(q).any(axis=1)
     where = f" after t = {te[reached][-1]:g}" if reached.any() else " before the first sample"
+    if status in (2, -105) and origin:
+        return NonFiniteStateError(f"{method} failed{where}: {origin}")
     if status == 1:
         return SingularMassMatrixError(
             f"{method}: the mass matrix of '{model_name}' became singular or not positive "

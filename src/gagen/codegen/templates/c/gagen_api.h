@@ -14,7 +14,7 @@
 
 #include "integrator.h"
 
-#define GAGEN_API_VERSION 1
+#define GAGEN_API_VERSION 3
 
 typedef struct {
     int version;                     /* GAGEN_API_VERSION */
@@ -35,9 +35,10 @@ typedef struct {
     void (*frame_offsets)(const double *p, double *F);
     int (*frame_placement)(const double *q, const double *p, int frame, double *R,
                            double *pos);
-    int (*frame_jacobian)(const double *q, const double *p, int frame, double *J);
+    int (*frame_jacobian)(const double *q, const double *p, int frame, int reference,
+                          double *J);
     int (*frame_velocity)(const double *q, const double *qd, const double *p, int frame,
-                          double *v);
+                          int reference, double *v);
     void (*regressor)(const double *q, const double *qd, const double *qdd, const double *p,
                       double *Y);
     void (*regressor_parameters)(const double *p, double *pi);
@@ -47,6 +48,28 @@ typedef struct {
                     const double *t_eval, int n_eval, double *y_out, gagen_ode_stats *stats);
     int (*control_torques)(const gagen_control *c, const double *p, long m, const double *t,
                            const double *y, double *tau);
+    /* centre of mass and centroidal dynamics (centroidal.c) */
+    void (*center_of_mass)(const double *q, const double *p, double *com);
+    void (*com_velocity)(const double *q, const double *qd, const double *p, double *vcom);
+    void (*com_jacobian)(const double *q, const double *p, double *J);
+    void (*centroidal_map)(const double *q, const double *p, double *Ag);
+    void (*centroidal_momentum)(const double *q, const double *qd, const double *p,
+                                double *hg);
+    void (*centroidal_map_time_variation)(const double *q, const double *qd, const double *p,
+                                          double *dAg);
+    void (*centroidal_bias)(const double *q, const double *qd, const double *p, double *b);
+    /* task space (frames.c) */
+    int (*frame_jacobians)(const double *q, const double *p, int count, const int *frames,
+                           int reference, double *J);
+    int (*frame_acceleration)(const double *q, const double *qd, const double *qdd,
+                              const double *p, int frame, int reference, int kind, double *a);
+    int (*frame_jacobian_time_variation)(const double *q, const double *qd, const double *p,
+                                         int frame, int reference, double *dJ);
+    int (*delassus)(const double *q, const double *p, int count, const int *frames, int dims,
+                    double *work, double *G);
+    int (*operational_space_inertia)(const double *q, const double *p, int count,
+                                     const int *frames, int dims, double *work,
+                                     double *Lambda);
 } gagen_model_api;
 
 typedef struct {
