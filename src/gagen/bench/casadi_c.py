@@ -21,17 +21,20 @@ gagen's (the joints' damping, which gagen's dynamics have and adam's do not, tak
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import os
 import shutil
 import subprocess
 import tempfile
+import time
 import warnings
 from pathlib import Path
 
 import numpy as np
 
+from .casadi import COMPILE_LIMIT, _compile
 from .common import optional
 
 FLAGS = ("-O3", "-march=native")
@@ -194,9 +197,12 @@ def _for_adam(text: str) -> str:
     return ET.tostring(robot, encoding="unicode")
 
 
-def compiled_object(source: Path, folder: Path) -> tuple[Path | None, str]:
+def compiled_object(source: Path, folder: Path, limit: float = COMPILE_LIMIT
+                    ) -> tuple[Path | None, str]:
     """CasADi's generated C compiled once (-O3 -march=native) and kept in `folder` under the
-    hash of the source and the command; (its path, "") or (None, why not)."""
+    hash of the source and the command; (its path, "") or (None, why not). One process
+    compiles a source at a time (a lock file next to the object; another run of the same
+    source waits for it); waiting and compiling together stop after `limit` seconds."""
     compiler = _compiler()
     version = subprocess.run([compiler, "--version"], capture_output=True, text=True,
                              check=False).stdout
@@ -206,13 +212,30 @@ def compiled_object(source: Path, folder: Path) -> tuple[Path | None, str]:
     if obj.is_file():
         return obj, ""
     folder.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=folder) as tmp:
-        built = Path(tmp) / "casadi.o"
-        result = subprocess.run([compiler, *FLAGS, "-c", str(source), "-o", str(built)],
-                                capture_output=True, text=True, check=False)
-        if result.returncode != 0:
-            return None, "CasADi's C did not compile: " + result.stderr.strip()[-300:]
-        os.replace(built, obj)
+    deadline = time.monotonic() + limit
+    late = f"CasADi's C did not compile within {limit / 60:.0f} min on this machine"
+    with open(folder / f"{obj.stem}.lock", "w") as lock:
+        while True:  # another run compiling the same source: wait for its object
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    return None, late
+                time.sleep(5.0)
+        if obj.is_file():
+            return obj, ""
+        with tempfile.TemporaryDirectory(dir=folder) as tmp:
+            built = Path(tmp) / "casadi.o"
+            try:
+                _compile([compiler, *FLAGS, "-c", str(source), "-o", str(built)],
+                         max(deadline - time.monotonic(), 1.0))
+            except subprocess.TimeoutExpired:
+                return None, late
+            except subprocess.CalledProcessError as error:
+                return None, "CasADi's C did not compile: " + error.output.decode(
+                    errors="replace").strip()[-300:]
+            os.replace(built, obj)
     return obj, ""
 
 
