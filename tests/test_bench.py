@@ -315,3 +315,31 @@ def test_adam_and_casadi_agree_with_gagen_on_a_floating_base():
     wrong = CasadiPeer(path, dyn.coordinates[6:], g + 1.0)
     with pytest.raises(RuntimeError, match="disagree"):
         check(dyn, wrong, np.random.default_rng(1))
+
+
+def test_casadi_objects_are_compiled_once_and_a_held_lock_is_waited_for_within_the_limit(
+        tmp_path):
+    """bench/casadi_c.compiled_object: the object is kept under its source's hash and reused;
+    while another run holds the source's lock, a second waits, and gives up with a note
+    once the limit has passed instead of compiling the same C again."""
+    import fcntl
+
+    from gagen.bench.casadi_c import _compiler, compiled_object
+
+    if _compiler() is None:
+        pytest.skip("no C compiler")
+    source = tmp_path / "peer.c"
+    source.write_text("double peer(double x) { return 2.0 * x; }\n")
+    folder = tmp_path / "objects"
+    obj, why = compiled_object(source, folder)
+    assert why == "" and obj.is_file() and obj.parent == folder
+    built = obj.stat().st_mtime_ns
+    assert compiled_object(source, folder) == (obj, "") and obj.stat().st_mtime_ns == built
+    source.write_text("double peer(double x) { return 3.0 * x; }\n")
+    probe, _ = compiled_object(source, tmp_path / "probe")  # the new source's object name
+    with open(folder / f"{probe.stem}.lock", "w") as lock:  # held as a compiling run holds it
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        late, why = compiled_object(source, folder, limit=0.5)
+    assert late is None and "did not compile within" in why
+    assert not (folder / probe.name).exists()
+    assert compiled_object(source, folder) == (folder / probe.name, "")
