@@ -85,7 +85,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "8aed104a3cd7bcbc86f9ec1e706c48b6e90f361dcb53bc8268b8247099b8383a") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "c381bf2f1f95c9e753e29e9b7ce853a38df46da66d1f6ed5bfb41b08fa2aeaf2") < 0) {
         Py_DECREF(module);
         return NULL;
     }
