@@ -361,8 +361,9 @@ class Bench:
         names = [_short(m if isinstance(m, str) else m[0]) for m in builds]
         say(f"cold builds of {', '.join(names)}, with and without the derivatives")
         build = build_rows(builds, self.scratch / "derivative-builds", progress=say)
-        for note in build_notes(build, [r["model"] for r in build
-                                        if r["model"].endswith("(floating)")]):
+        floating_builds = dict.fromkeys(r["model"] for r in build  # once per model
+                                        if r["model"].endswith("(floating)"))
+        for note in build_notes(build, list(floating_builds)):
             self._note("derivatives", note)
         return {"rows": rows, "builds": build, "casadi": casadi,
                 "repeats": s.derivatives_repeats}
