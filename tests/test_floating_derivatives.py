@@ -73,11 +73,17 @@ def dynamics(name: str, backend: str):
     return lambdify_dynamics(name) if backend == "lambdify" else compiled_dynamics(name, backend)
 
 
+# robots with continuous joints, which Pinocchio's URDF parse gives two coordinates (cos,
+# sin) that Reference does not map: gagen's builder of Pinocchio's model instead
+BUILT = {"tiago.urdf"}
+
+
 @functools.cache
 def reference(name: str) -> Reference:
-    """Pinocchio's model: its own URDF parse for the robots, gagen's builder for the trees."""
+    """Pinocchio's model: its own URDF parse for the robots, gagen's builder for the trees
+    (and the robots in BUILT)."""
     dyn = lambdify_dynamics(name) if name in TREES else compiled_dynamics(name, "auto")
-    if name in TREES:
+    if name in TREES or name in BUILT:
         return Reference(dyn, pinocchio_model(numeric_model(_model(name))))
     return Reference(dyn, pin.buildModelFromUrdf(str(URDF / name), pin.JointModelFreeFlyer()))
 
