@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import gagen
 from gagen.app.cli import main
 from gagen.bench import timing
 from gagen.bench.common import cpu_model, find_urdf_dir, machine_info
@@ -274,3 +276,70 @@ def test_centroidal_goal_is_judged_on_ccrba_and_dccrba():
     first, second = goal_notes(rows)
     assert "ccrba" in first and first.endswith("met (2.10x).") and "NOT" not in first
     assert "dccrba" in second and second.endswith("NOT met (1.20x).")
+
+
+# --------------------------------------------------- the derivatives' floating-base peers
+
+def test_derivative_goal_and_build_notes_and_the_casadi_table():
+    from gagen.bench.derivatives import build_notes, casadi_table, goal_note
+
+    rows = [{"model": "ANYmal C", "quantity": "inverse dynamics derivatives",
+             "implementation": implementation, "median_us": us}
+            for implementation, us in (("gagen compiled", 2.0), ("Pinocchio", 5.0))]
+    note = goal_note(rows, "ANYmal C", "inverse dynamics derivatives", 2.0)
+    assert note.startswith("Goal: ANYmal C's inverse dynamics derivatives") and "met (2.50x" in note
+    assert "NOT met" in goal_note(rows, "ANYmal C", "inverse dynamics derivatives", 3.0)
+    assert goal_note(rows, "ANYmal C") is None  # no forward-dynamics rows
+    builds = [{"model": "anymal (floating)", "module": "main", "wall_s": 12.0},
+              {"model": "anymal (floating)", "module": "derivatives", "wall_s": 9.0}]
+    assert build_notes(builds, ["anymal (floating)"]) == [
+        ("Goal: anymal (floating)'s derivative module built cold no slower than its main "
+         "module: met (9.0 s against 12.0 s).")]
+    table = casadi_table([{"model": "ANYmal C", "nv": 18, "gagen_us": 4.0, "casadi_us": 60.0,
+                           "ratio": 15.0}])
+    assert table.splitlines()[2] == "| ANYmal C | 18 | 4.00 | 60.00 | 15.00 |"
+
+
+def test_adam_and_casadi_agree_with_gagen_on_a_floating_base():
+    """The CasADi peer's conventions (BODY_FIXED velocities, q's layout, the Jacobian's
+    columns) checked against gagen's forward dynamics and its derivatives."""
+    pytest.importorskip("casadi")
+    pytest.importorskip("adam")
+    from gagen.bench.casadi_c import CasadiPeer, check
+
+    path = Path(__file__).resolve().parent / "data" / "urdf" / "double_pendulum.urdf"
+    dyn = gagen.load(path, floating_base=True, backend="lambdify")
+    g = dict(zip(dyn.parameters, dyn.parameter_vector()))["g"]
+    peer = CasadiPeer(path, dyn.coordinates[6:], g)
+    check(dyn, peer, np.random.default_rng(1))
+    wrong = CasadiPeer(path, dyn.coordinates[6:], g + 1.0)
+    with pytest.raises(RuntimeError, match="disagree"):
+        check(dyn, wrong, np.random.default_rng(1))
+
+
+def test_casadi_objects_are_compiled_once_and_a_held_lock_is_waited_for_within_the_limit(
+        tmp_path):
+    """bench/casadi_c.compiled_object: the object is kept under its source's hash and reused;
+    while another run holds the source's lock, a second waits, and gives up with a note
+    once the limit has passed instead of compiling the same C again."""
+    import fcntl
+
+    from gagen.bench.casadi_c import _compiler, compiled_object
+
+    if _compiler() is None:
+        pytest.skip("no C compiler")
+    source = tmp_path / "peer.c"
+    source.write_text("double peer(double x) { return 2.0 * x; }\n")
+    folder = tmp_path / "objects"
+    obj, why = compiled_object(source, folder)
+    assert why == "" and obj.is_file() and obj.parent == folder
+    built = obj.stat().st_mtime_ns
+    assert compiled_object(source, folder) == (obj, "") and obj.stat().st_mtime_ns == built
+    source.write_text("double peer(double x) { return 3.0 * x; }\n")
+    probe, _ = compiled_object(source, tmp_path / "probe")  # the new source's object name
+    with open(folder / f"{probe.stem}.lock", "w") as lock:  # held as a compiling run holds it
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        late, why = compiled_object(source, folder, limit=0.5)
+    assert late is None and "did not compile within" in why
+    assert not (folder / probe.name).exists()
+    assert compiled_object(source, folder) == (folder / probe.name, "")

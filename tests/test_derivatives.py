@@ -161,6 +161,40 @@ def test_matches_pinocchio(case, backend):
         assert_close(B[dyn.n:], gagen_order(aba[2]))
 
 
+@pytest.mark.parametrize("case", ["random7", "random12"])
+def test_the_loop_form_matches_pinocchio_on_a_fixed_base(case):
+    """The derivative module in loop form (model/derivatives_loop.c.j2), which "auto" gives
+    from DERIVATIVE_LOOP_FROM_DOF coordinates on, on small trees with every joint type."""
+    pin = pytest.importorskip("pinocchio")
+    from gagen.building.builder import load_derivative_module
+    from gagen.codegen.config import CodegenConfig
+    from gagen.reference.pinocchio import joint_forces, pinocchio_model, to_pinocchio
+
+    model = _model(CASES[case][0])
+    dyn = gagen.load(model)
+    dyn.bind_derivatives(load_derivative_module(model,
+                                                config=CodegenConfig(derivative_form="loop")))
+    rng = np.random.default_rng(12)
+    for _ in range(2):
+        q, qd, qdd, tau, p = random_state(dyn, rng)
+        pm = pinocchio_model(dyn.model, p)
+        gagen_order = functools.partial(matrix_from_pinocchio, pm)
+        qp, vp, ap, tp = to_pinocchio(pm, q, qd, qdd, tau - joint_forces(pm, qd))
+        data = pm.createData()
+        rnea = [np.array(a) for a in pin.computeRNEADerivatives(pm, data, qp, vp, ap)]
+        aba = [np.array(a) for a in pin.computeABADerivatives(pm, data, qp, vp, tp)]
+        coriolis = np.array(pin.computeCoriolisMatrix(pm, data, qp, vp))
+        minv = np.triu(aba[2]) + np.triu(aba[2], 1).T
+        dtau_dq, dtau_dqd = dyn.inverse_dynamics_derivatives(q, qd, qdd, p)
+        assert_close(dtau_dq, gagen_order(rnea[0]))
+        assert_close(dtau_dqd, gagen_order(rnea[1] + np.diag(pm.damping)))
+        dqdd_dq, dqdd_dqd, dqdd_dtau = dyn.forward_dynamics_derivatives(q, qd, tau, p)
+        assert_close(dqdd_dq, gagen_order(aba[0]))
+        assert_close(dqdd_dqd, gagen_order(aba[1] - minv @ np.diag(pm.damping)))
+        assert_close(dqdd_dtau, gagen_order(minv))
+        assert_close(dyn.coriolis_matrix(q, qd, p), gagen_order(coriolis))
+
+
 # --- against central differences of gagen's own functions -------------------------------
 
 def central_difference(f, x, h=1e-6):
@@ -302,9 +336,8 @@ def test_derivative_method_rule():
     assert derivative_method(resolve_model(f"chain:{ANALYTIC_FROM_DOF}")) == "analytic"
     assert derivative_method(resolve_model("rrr"), "analytic") == "analytic"
     floating = resolve_model(SHARED_URDF / "panda.urdf", floating_base=True)
-    assert derivative_method(floating) == "forward"
-    with pytest.raises(ValueError, match="floating joint"):
-        derivative_method(floating, "analytic")
+    assert derivative_method(floating) == "analytic"  # whatever its size
+    assert derivative_method(floating, "forward") == "forward"
     with pytest.raises(ValueError, match="unknown derivative method"):
         derivative_method(floating, "backward")
 

@@ -94,7 +94,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "01f7dd19a20550f5503e7c45c37dee73b41d764b6b62a0eb03c5078e235940ff") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "8113b22ae488ae610525362d8f5aa611f25bb0bfd4c29fed4e768b0538414b10") < 0) {
         Py_DECREF(module);
         return NULL;
     }

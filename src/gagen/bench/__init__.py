@@ -30,10 +30,12 @@ Default (a few minutes on 2 cores):
   scaling           cold builds of chain:2, chain:4, chain:6 and the UR5 (each in a fresh
                     process): derive, generate, compile times, peak memory, operations
                     before/after CSE, forward dynamics per call
-  derivatives       FD/ID derivatives and the Coriolis matrix on rrr and the Panda against
-                    Pinocchio's computeABADerivatives / computeRNEADerivatives /
-                    computeCoriolisMatrix and central differences; the derivative
-                    module's cold build
+  derivatives       FD/ID derivatives and the Coriolis matrix on rrr, the Panda, and ANYmal C
+                    and Talos reduced on a floating base against Pinocchio's
+                    computeABADerivatives / computeRNEADerivatives / computeCoriolisMatrix
+                    and central differences; the floating robots' FD Jacobian in C against
+                    CasADi's generated C of adam's aba Jacobian (-O3, its object cached);
+                    cold builds of the main and derivative modules
 --full adds, in tens of minutes:
   scaling           chain:5 ... chain:50, UR5, Panda, ANYmal C, Talos reduced and full and
                     Tiago (fixed bases): build times and the curve; FD, ID and M per call

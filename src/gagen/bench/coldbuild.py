@@ -1,9 +1,10 @@
 """A cold build in a fresh process, measured from outside: wall time, stage times and the
 peak memory of the whole process tree (Python and the compilers running at once).
 
-`python -m gagen.bench.coldbuild MODEL CACHE_DIR [--derivatives]` builds one model (or its
-derivative module) into a cache folder and prints one JSON line: the build report (stages,
-operation counts, module path). The
+`python -m gagen.bench.coldbuild MODEL CACHE_DIR [--derivatives] [--floating-base]
+[--derivative-form=FORM]` builds one model (or its derivative module, in a given form)
+into a cache folder and prints one JSON line: the build report (stages, operation counts,
+module path). The
 benchmark runs it as a subprocess through `measured_build`, which samples the resident
 memory of the subprocess and all its descendants every 20 ms (Linux's /proc; elsewhere the
 largest single process, from the OS's own accounting).
@@ -22,11 +23,15 @@ from pathlib import Path
 
 
 def measured_build(name: str, cache_dir: Path, timeout: float = 1800.0,
-                   derivatives: bool = False) -> dict:
-    """Build `name` (its derivative module with `derivatives`) cold in a fresh Python
-    process; its report plus `wall_s`, `peak_mb`."""
+                   derivatives: bool = False, floating_base: bool = False,
+                   derivative_form: str | None = None) -> dict:
+    """Build `name` (its derivative module with `derivatives`, in `derivative_form` if
+    given; a URDF on a floating base with `floating_base`) cold in a fresh Python process;
+    its report plus `wall_s`, `peak_mb`."""
     command = [sys.executable, "-m", "gagen.bench.coldbuild", str(name), str(cache_dir)]
     command += ["--derivatives"] if derivatives else []
+    command += ["--floating-base"] if floating_base else []
+    command += [f"--derivative-form={derivative_form}"] if derivative_form else []
     start = time.perf_counter()
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     sampler = _TreeMemory(proc.pid)
@@ -95,13 +100,17 @@ def main(argv: list[str] | None = None) -> int:
     from sympy.core.cache import clear_cache
 
     from ..building.builder import build
+    from ..codegen.config import CodegenConfig
     from ..model.resolve import resolve_model
 
     args = argv or sys.argv[1:]
     name, cache_dir = args[:2]
+    forms = [a.split("=", 1)[1] for a in args if a.startswith("--derivative-form=")]
+    config = CodegenConfig(derivative_form=forms[0]) if forms else None
     clear_cache()
-    model = resolve_model(name)
-    path, report = build(model, cache_dir=Path(cache_dir), derivatives="--derivatives" in args)
+    model = resolve_model(name, floating_base="--floating-base" in args)
+    path, report = build(model, cache_dir=Path(cache_dir), derivatives="--derivatives" in args,
+                         config=config)
     print(json.dumps({"model": model.name, "dof": model.dof, "stages": report.stages,
                       "ops_before_cse": report.ops_before_cse,
                       "ops_after_cse": report.ops_after_cse, "cached": report.cached,

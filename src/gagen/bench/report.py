@@ -221,14 +221,25 @@ def markdown(results: dict, images: dict | None = None) -> str:
         throughput_table, None, images)
     dv = results.get("derivatives", {})
     lines += _section(
-        results, "derivatives", "The derivatives per call (rrr and the Panda)",
+        results, "derivatives",
+        "The derivatives per call (rrr, the Panda; ANYmal C and Talos reduced floating)",
         "`dyn.forward_dynamics_derivatives`, `inverse_dynamics_derivatives` and "
         "`coriolis_matrix` from the compiled derivative module against Pinocchio's "
         "`computeABADerivatives`, `computeRNEADerivatives` and `computeCoriolisMatrix` (the "
-        "Panda: Pinocchio's own URDF parse), and against central differences of gagen's "
-        "compiled forward dynamics (6n states in one stacked call); "
-        f"{dv.get('repeats', '?')} interleaved repeats, ratios to gagen compiled per model "
-        "and quantity (> 1: slower than gagen).", derivatives_table, None, images)
+        "robots: Pinocchio's own URDF parse, on its FreeFlyer for ANYmal and Talos), and "
+        "against central differences of gagen's compiled forward dynamics (6n states in "
+        f"one stacked call; fixed bases only); {dv.get('repeats', '?')} interleaved "
+        "repeats, ratios to gagen compiled per model and quantity (> 1: slower than "
+        "gagen).", derivatives_table, None, images)
+    if dv.get("casadi"):
+        from .casadi_c import FLAGS
+        from .derivatives import casadi_table
+
+        lines += [("In C, on a floating base: gagen's derivative module against the C that "
+                   "CasADi generates for the Jacobian of adam's `aba` (by q, v and the "
+                   f"joint torques; compiled with `{' '.join(FLAGS)}`), both in one "
+                   "harness over the same 100 random states, round by round (medians of "
+                   "21 rounds, µs per evaluation):"), "", casadi_table(dv["casadi"]), ""]
     if dv.get("builds"):
         from .derivatives import build_table
 

@@ -18,6 +18,7 @@ import shutil
 import tempfile
 import time
 import traceback
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -317,8 +318,20 @@ class Bench:
         return {"rows": rows, "repeats": s.panda_repeats}
 
     def derivatives(self) -> dict:
+        import gagen
+
         from ..model.resolve import resolve_model
-        from .derivatives import build_rows, derivative_rows, goal_note
+        from .casadi_c import harness_folder
+        from .derivatives import (
+            FLOATING_GOAL,
+            FLOATING_ROBOTS,
+            build_notes,
+            build_rows,
+            casadi_rows,
+            derivative_rows,
+            goal_note,
+            pinocchio_floating,
+        )
 
         s = self.settings
         def say(text):
@@ -326,7 +339,8 @@ class Bench:
 
         models = {"rrr": (self.rrr()["compiled"], peers.pinocchio_model(resolve_model("rrr")))}
         folder = find_urdf_dir(self.urdf_dir, needed=PANDA) if s.mode != "smoke" else None
-        builds = ["rrr"]
+        builds: list = ["rrr"]
+        floating = {}
         if folder is not None:
             urdf = folder / PANDA
             dyn = self.loaded.get(str(urdf))
@@ -335,20 +349,44 @@ class Bench:
             say("building the Panda's derivative module")
             models["Panda"] = (dyn, peers.pinocchio_from_urdf(dyn, urdf))
             builds.append(str(urdf))
+            for label, name in FLOATING_ROBOTS:
+                path = folder / name
+                if not path.exists():
+                    self._note("derivatives", f"{name} not found: {label} is left out.")
+                    continue
+                say(f"building {label} on a floating base, with its derivative module")
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", gagen.InertiaWarning)
+                    dyn = gagen.load(path, floating_base=True,
+                                     cache_dir=self.scratch / "floating-derivatives")
+                models[label] = (dyn, pinocchio_floating(dyn, path))
+                floating[label] = (dyn, path)
+                builds.append((str(path), True))
         elif s.mode != "smoke":
             self.results["notes"].append(f"{PANDA} not found: the derivatives section runs "
                                          "on rrr only (--urdf-dir).")
         rows = derivative_rows(models, s.derivatives_repeats, s.target_s, progress=say)
         for label in models:
-            note = goal_note(rows, label)
-            if note and label == "Panda":
-                self.results["notes"].append(note)
-                say(note)
-        say(f"cold builds of {', '.join(_short(m) for m in builds)}, with and without "
-            "the derivatives")
+            notes = [goal_note(rows, label)] if label == "Panda" else []
+            if label in floating:
+                notes = [goal_note(rows, label, quantity, FLOATING_GOAL) for quantity in
+                         ("forward dynamics derivatives", "inverse dynamics derivatives")]
+            for note in notes:
+                if note:
+                    self.results["notes"].append(note)
+                    say(note)
+        casadi, casadi_notes = casadi_rows(floating, harness_folder(), progress=say)
+        for note in casadi_notes:
+            self._note("derivatives", note)
+        names = [_short(m if isinstance(m, str) else m[0]) for m in builds]
+        say(f"cold builds of {', '.join(names)}, with and without the derivatives")
         build = build_rows(builds, self.scratch / "derivative-builds", progress=say)
-        return {"rows": rows, "builds": build, "repeats": s.derivatives_repeats}
-
+        floating_builds = dict.fromkeys(r["model"] for r in build  # once per model
+                                        if r["model"].endswith("(floating)"))
+        for note in build_notes(build, list(floating_builds)):
+            self._note("derivatives", note)
+        return {"rows": rows, "builds": build, "casadi": casadi,
+                "repeats": s.derivatives_repeats}
 
     def _panda(self, section: str):
         """(dyn, urdf) of the Panda, built once (or by the scaling study); None, note."""

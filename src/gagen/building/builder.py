@@ -30,7 +30,7 @@ from ..errors import BuildError, CompilerNotFoundError, warn_user
 from ..model.model import Model
 from ..runtime.compiled import CompiledDynamics
 from ..symbolic.derivation import derivation_for, derive_equations
-from ..symbolic.derivatives import derive_derivatives
+from ..symbolic.derivatives import derivative_form, derive_derivatives
 from .cache import (  # noqa: F401 (re-exported: the cache's API was here)
     _CHECKSUM_FILE,
     _OWNER_FILE,
@@ -76,6 +76,8 @@ def source_key(model: Model, derivation: str = "auto", config: CodegenConfig | N
     h = hashlib.sha256()
     parts = [model.canonical(), ",".join(model.parameters), __version__, generator_digest(),
              derivation_for(model, derivation)]
+    if config is not None and not derivatives:
+        config = config.for_main_module()
     if config is not None and config != CodegenConfig():
         parts.append(repr(config))
     if derivatives:
@@ -146,9 +148,11 @@ def generate_sources(model: Model, folder: Path, progress: Progress | None = Non
     start = time.perf_counter()
     eqs = derive_equations(model, method)
     if derivatives:
-        deq = derive_derivatives(eqs)
+        form = derivative_form(model, (config or CodegenConfig()).derivative_form)
+        deq = derive_derivatives(eqs, form=form)
         detail = (f"{model.dof} coordinates, {len(deq.intermediates)} intermediates "
-                  f"(equations {eqs.seconds:.2f} s, derivatives {deq.seconds:.2f} s)")
+                  f"(equations {eqs.seconds:.2f} s, derivatives {deq.seconds:.2f} s; "
+                  f"{form} form)")
     else:
         detail = f"{model.dof} coordinates, {len(eqs.intermediates)} intermediates"
     progress.stage("derive", time.perf_counter() - start, detail)
@@ -470,16 +474,19 @@ def load_compiled(model: Model, cache_dir: Path | None = None, fast_math: bool =
 
 def load_derivative_module(model: Model, cache_dir: Path | None = None, fast_math: bool = False,
                            verbose: bool | None = None, portable: bool = False,
-                           derivation: str = "auto", input_digest: str | None = None):
+                           derivation: str = "auto", input_digest: str | None = None,
+                           config: CodegenConfig | None = None):
     """The derivative module of a model (codegen/derivatives.py): from the cache, or built
     now, showing its progress as `build` does. With `input_digest` (the derivative key of
     gagen.load's input key, `cache.derivatives_input_key`), it is recorded in the cache's
-    index, so the next load of the same input finds it without SymPy."""
+    index, so the next load of the same input finds it without SymPy. `config`: the code
+    generator's settings (its derivative module's form, say), as `build` takes them."""
     module = _import_built(model, {"cache_dir": cache_dir, "fast_math": fast_math,
                                    "portable": portable, "verbose": bool(verbose),
-                                   "derivation": derivation, "derivatives": True})
-    _checked_and_recorded(module, source_key(model, derivation, derivatives=True), model,
-                          cache_dir, input_digest)
+                                   "derivation": derivation, "derivatives": True,
+                                   "config": config})
+    _checked_and_recorded(module, source_key(model, derivation, config, derivatives=True),
+                          model, cache_dir, input_digest)
     return module
 
 

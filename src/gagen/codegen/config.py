@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from .segments import DERIVATIVE_SPLIT_CHARS, FILE_CHARS, SEGMENT_CHARS, SPLIT_CHARS
 
@@ -25,6 +25,8 @@ class CodegenConfig:
     derivative_split_chars
                        split_chars for the derivative module's kernels (codegen/segments.py)
     file_chars         the segment functions go into files of about this many characters
+    derivative_form    the derivative module's form: "unrolled", "loop" or "auto" (by the
+                       measured rule of gagen.symbolic.derivatives.derivative_form)
     cse                sympy.cse over the intermediates and outputs (False: the derivation's
                        own named intermediates as they are; None: for the Gibbs-Appell form
                        only. The recursive form names every per-body quantity once already:
@@ -39,3 +41,10 @@ class CodegenConfig:
     derivative_split_chars: int = DERIVATIVE_SPLIT_CHARS
     cse: bool | None = None
     file_chars: int = FILE_CHARS
+    derivative_form: str = "auto"
+
+    def for_main_module(self) -> CodegenConfig:
+        """These settings without those that only the derivative module reads: the main
+        module's source key does not move with them."""
+        return replace(self, derivative_split_chars=DERIVATIVE_SPLIT_CHARS,
+                       derivative_form="auto")

@@ -39,7 +39,7 @@ from ..symbolic.derivatives import DerivativeEquations
 from ..symbolic.differentiate import needed_definitions
 from .config import CodegenConfig
 from .cse import CSEResult
-from .ldlt import ldlt_plan
+from .ldlt import least_fill_plan
 from .render import (
     CodeBlock,
     GagenCPrinter,
@@ -60,6 +60,8 @@ DERIVATIVE_KERNEL_ARRAYS = {
     "derivatives_acceleration": ("S", "q", "qd", "qdd", "p", "J"),
     "derivatives_mass_forcing": ("S", "q", "qd", "tau", "p", "MF"),
     "coriolis_matrix": ("q", "qd", "p", "C"),
+    "derivatives_geometry": ("q", "p", "G"),
+    "derivatives_joints": ("qd", "p", "T"),
 }
 # Every one of them runs in loops (stacked inputs, MPC): built with the FMA clone too.
 DERIVATIVE_LOOPED_KERNELS = tuple(DERIVATIVE_KERNEL_ARRAYS)
@@ -71,6 +73,12 @@ DERIVATIVE_COPIED_FILES = ("gagen_math.h", "gagen_api.h", "integrator.h")
 DERIVATIVE_C_FILES = (("derivatives.c", "api"), ("derivative_fixed.c", "fixed"),
                       ("derivative_acceleration.c", "acceleration"),
                       ("derivative_coriolis.c", "coriolis"))
+# The loop form solves with M for the forward-dynamics derivatives' 3n right-hand sides at
+# most this many columns at a time, kept in registers (12 AVX registers, of 16), in as few
+# chunks as that allows, each a multiple of 8 columns
+SOLVE_CHUNK = 48
+# ... in loop form: the API functions and the loops, and the generated geometry
+DERIVATIVE_LOOP_FILES = (("derivatives.c", "api"), ("derivative_geometry.c", "geometry"))
 # the derivative module's one file that speaks to Python: its kernels' table
 DERIVATIVE_MODULE_FILE = "derivatives_module.c"
 
@@ -101,6 +109,61 @@ def derivative_program(deq: DerivativeEquations
     }
     flat = [e for values in outputs.values() for e in values]
     return needed_definitions(deq.intermediates, flat), outputs
+
+
+def loop_program(deq: DerivativeEquations
+                 ) -> tuple[list[tuple[sp.Symbol, sp.Expr]], dict[str, list[sp.Expr]]]:
+    """The loop form's outputs (the geometry G and the joint terms T, module docstring of
+    model/derivatives_loop.c.j2) and the definitions they need."""
+    tree = deq.geometry
+    outputs = {
+        "geometry": [e for row in tree.inertia + tree.motion + tree.base for e in row],
+        "joints": [*tree.armature, *tree.damping, *tree.dissipative],
+    }
+    flat = [e for values in outputs.values() for e in values]
+    return needed_definitions(deq.intermediates, flat), outputs
+
+
+@dataclass
+class LoopBlocks:
+    """The code of the loop form's two generated kernels."""
+
+    geometry: CodeBlock
+    joints: CodeBlock
+
+
+def solve_chunk(n: int) -> int:
+    """The columns the loop form's solve takes at a time for 3n right-hand sides."""
+    chunks = -(-3 * n // SOLVE_CHUNK)
+    return -(-3 * n // (8 * chunks)) * 8
+
+
+def _loop_context(tree, cse: CSEResult, kernels: _Kernels) -> dict:
+    """The loop form's blocks and tree tables for model/derivatives_loop.c.j2."""
+    out = cse.outputs
+    geometry = kernels.block("derivatives_geometry", out["geometry"],
+                             [f"G[{k}]" for k in range(len(out["geometry"]))])
+    kept = [(k, e) for k, e in enumerate(out["joints"]) if e != 0]
+    joints = kernels.block("derivatives_joints", [e for _, e in kept],
+                           [f"T[{k}]" for k, _ in kept])
+    for cols in tree.columns:  # the C reads a link's coordinates as a range
+        if cols != list(range(cols[0], cols[0] + len(cols))):
+            raise AssertionError("a joint's velocity coordinates are not contiguous")
+    slot = {b: r for r, b in enumerate(tree.roots)}
+    up = tree.column_parent
+    runs = []
+    for c in range(len(up)):
+        lo = c
+        while lo > 0 and up[lo] == lo - 1:
+            lo -= 1
+        runs.append(lo)
+    return {"tree": tree, "blocks": LoopBlocks(geometry, joints),
+            "first": [cols[0] for cols in tree.columns],
+            "count": [len(cols) for cols in tree.columns],
+            "root_slot": [slot.get(b, -1) for b in range(len(tree.parents))],
+            "free": [int(f) for f in tree.free_roots], "chunk": solve_chunk(len(up)),
+            "runs": runs,
+            "depth_first": tree.column_order == list(range(len(up)))}
 
 
 def _blocks(deq: DerivativeEquations, kernels: _Kernels) -> DerivativeBlocks:
@@ -144,11 +207,16 @@ def generate_derivatives(deq: DerivativeEquations, module_name: str, key: str,
                          ) -> GeneratedCode:
     """The C sources and header of a model's derivative module and the module's table of
     them (file name -> text). `equations_key` is the source key of the model's main module:
-    the module carries it, so the runtime pairs the two modules of the same equations only."""
+    the module carries it, so the runtime pairs the two modules of the same equations only.
+    The module is in the form `deq` was derived in: unrolled (the derivative program
+    printed whole) or loop (`deq.geometry`: the tree's geometry, and loops over the tree)."""
     config = config or CodegenConfig()
     eqs = deq.equations
     ident = c_identifier(eqs.model.name)
-    definitions, outputs = derivative_program(deq)
+    if deq.geometry is not None:
+        definitions, outputs = loop_program(deq)
+    else:
+        definitions, outputs = derivative_program(deq)
     cse = CSEResult(eqs, eqs.derivation == "gibbs-appell" if config.cse is None
                     else config.cse, definitions, outputs)
     printer = GagenCPrinter(_symbol_names(eqs, cse), list(eqs.coords.q), config.fast_trig)
@@ -156,27 +224,29 @@ def generate_derivatives(deq: DerivativeEquations, module_name: str, key: str,
                        dataclasses.replace(config, split_chars=config.derivative_split_chars),
                        arrays=DERIVATIVE_KERNEL_ARRAYS,
                        looped=DERIVATIVE_LOOPED_KERNELS)
-    blocks = _blocks(deq, kernels)
     n = eqs.n
-    lower = [(r, s) for r in range(n) for s in range(r + 1)]
-    zero = {(r, s) for (r, s), e in zip(lower, cse.outputs["mass_matrix"]) if e == 0}
     header = f"generated by gagen {__version__} for model '{ident}'; do not edit"
     context = {
         **model_context(eqs),
-        "ldlt": ldlt_plan(n, zero),
-        "blocks": blocks,
         "module_name": module_name,
         "key": key,
         "equations_key": equations_key,
         "header": header,
     }
     env = template_environment()
+    if deq.geometry is not None:
+        context.update(_loop_context(deq.geometry, cse, kernels))
+        parts, source = DERIVATIVE_LOOP_FILES, env.get_template("model/derivatives_loop.c.j2")
+    else:
+        lower = [(r, s) for r in range(n) for s in range(r + 1)]
+        zero = {(r, s) for (r, s), e in zip(lower, cse.outputs["mass_matrix"]) if e == 0}
+        context.update(blocks=_blocks(deq, kernels), solve=least_fill_plan(n, zero))
+        parts, source = DERIVATIVE_C_FILES, env.get_template("model/derivatives.c.j2")
     files = {
         f"{ident}_derivatives.h": env.get_template("model/derivatives.h.j2").render(context),
         DERIVATIVE_MODULE_FILE: env.get_template("model/derivatives_module.c.j2").render(context),
     }
-    source = env.get_template("model/derivatives.c.j2")
-    for name, part in DERIVATIVE_C_FILES:
+    for name, part in parts:
         files[name] = source.render(context, part=part)
     # kernels.c.j2 includes "<ident>.h": here the segment files include this module's header
     segment_context = {"header": header, "ident": f"{ident}_derivatives"}

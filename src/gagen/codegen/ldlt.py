@@ -59,3 +59,60 @@ def ldlt_plan(n: int, zero: set[tuple[int, int]]) -> LDLTPlan:
     backward = tuple((i, tuple(k for k in range(i + 1, n) if (k, i) in lnz))
                      for i in range(n - 1, -1, -1))
     return LDLTPlan(n, tuple(pivots), forward, backward)
+
+
+@dataclass(frozen=True)
+class OrderedPlan:
+    """An LDLᵀ plan (`ldlt_plan`) taken in an elimination order, its steps written with
+    the original coordinates and the flat indices of M's stored lower triangle (entry
+    (r, s), r >= s, at r*n + s), for templates that need no index arithmetic.
+
+    `pivots`: (j, diagonal, terms, updates): D_j = M[diagonal] - Σ U[a]² Dinv_k over
+    terms (a, k), then U[b] -= Σ U[c] U[d] Dinv_k over each update (b, ((c, d, k), ...)).
+    `forward`: (i, ((a, k), ...)): z_i = (x_i - Σ U[a] z_k) Dinv_i. `backward`: (i, ((a, k),
+    ...)): x_i -= Dinv_i Σ U[a] x_k. `order[t]` is the coordinate eliminated t-th."""
+
+    n: int
+    order: tuple[int, ...]
+    pivots: tuple[tuple[int, int, tuple, tuple], ...]
+    forward: tuple[tuple[int, tuple[tuple[int, int], ...]], ...]
+    backward: tuple[tuple[int, tuple[tuple[int, int], ...]], ...]
+    stored: int  # entries of the factor below the diagonal
+
+
+def ordered_plan(n: int, zero: set[tuple[int, int]], order: list[int]) -> OrderedPlan:
+    """The plan of P M Pᵀ = L D Lᵀ with P the permutation `order` (the t-th row of P M Pᵀ
+    is coordinate order[t]); `zero` holds M's structurally zero entries (r, s), r > s."""
+    def permuted_zero(a: int, b: int) -> bool:
+        r, s = order[a], order[b]
+        return (max(r, s), min(r, s)) in zero
+
+    pz = {(a, b) for a in range(n) for b in range(a) if permuted_zero(a, b)}
+    plan = ldlt_plan(n, pz)
+
+    def flat(a: int, b: int) -> int:  # M's stored entry of permuted (a, b)
+        r, s = order[a], order[b]
+        return max(r, s) * n + min(r, s)
+
+    pivots = tuple(
+        (order[p.j], flat(p.j, p.j), tuple((flat(p.j, k), order[k]) for k in p.terms),
+         tuple((flat(i, p.j), tuple((flat(i, k), flat(p.j, k), order[k]) for k in ks))
+               for i, ks in p.updates))
+        for p in plan.pivots)
+    forward = tuple((order[i], tuple((flat(i, k), order[k]) for k in ks))
+                    for i, ks in plan.forward)
+    backward = tuple((order[i], tuple((flat(k, i), order[k]) for k in ks))
+                     for i, ks in plan.backward)
+    stored = len(factor_pattern(n, pz))
+    return OrderedPlan(n, tuple(order), pivots, forward, backward, stored)
+
+
+def least_fill_plan(n: int, zero: set[tuple[int, int]]) -> OrderedPlan:
+    """The plan in whichever of the coordinates' order and its reverse keeps the factor
+    smaller. For a tree whose coordinates come parents first (gagen's), the reverse
+    eliminates the leaves first and L has no fill-in at all (Featherstone's LTDL): a
+    floating base, which couples to every joint, is eliminated last instead of first
+    (which would fill in every pair of joints, ANYmal's legs with each other)."""
+    natural = ordered_plan(n, zero, list(range(n)))
+    reverse = ordered_plan(n, zero, list(reversed(range(n))))
+    return reverse if reverse.stored < natural.stored else natural
