@@ -80,6 +80,21 @@ cdef inline void mcross(const double *a, const double *b, double *out) noexcept 
         out[3 + i] = t3[i]
 
 
+cdef inline void fcross(const double *a, const double *f, double *out) noexcept nogil:
+    """The dual cross product a ×* f of a twist and a wrench (linear first):
+    (a_w × f_l, a_w × f_τ + a_l × f_l)."""
+    cdef double t1[3]
+    cdef double t2[3]
+    cdef double t3[3]
+    cross3(a + 3, f, t1)
+    cross3(a + 3, f + 3, t2)
+    cross3(a, f, t3)
+    cdef int i
+    for i in range(3):
+        out[i] = t1[i]
+        out[3 + i] = t2[i] + t3[i]
+
+
 cdef inline void add_cross(const double *a, const double *b, double scale,
                            double *out) noexcept nogil:
     """out += scale (a × b)."""
@@ -119,6 +134,8 @@ cdef struct Ctx:
     const int *quat        # (nquat,) where each quaternion starts in q
     const int *chain       # (nf, nv) each frame's chain's coordinates, root first
     const int *chain_len   # (nf,)
+    const int *group_start  # (nf, nv) per chain position, its joint's first position
+    const int *group_end        # (nf, nv) and the position after its joint's last
     const double *order    # (nf, nv, nv) the chains' relation (k on or above j)
     const unsigned char *active
 
@@ -133,8 +150,8 @@ cdef class Plan:
 
     def __init__(self, model_capsule, derivative_capsule, int[::1] frames, int[::1] bodies,
                  int[:, ::1] table, int[::1] parent, int[::1] rows, int[::1] quat,
-                 int[:, ::1] chain, int[::1] chain_len, double[:, :, ::1] order,
-                 unsigned char[::1] active):
+                 int[:, ::1] chain, int[::1] chain_len, int[:, ::1] group_start,
+                 int[:, ::1] group_end, double[:, :, ::1] order, unsigned char[::1] active):
         cdef const gagen_model_api *api = <const gagen_model_api *>_table(
             model_capsule, "gagen.model_api")
         cdef const gagen_derivatives_api *dapi = <const gagen_derivatives_api *>_table(
@@ -145,7 +162,7 @@ cdef class Plan:
                 frames.shape[0] and order.shape[1] != api.nv):
             raise ValueError("the layout's sizes are not the model's")
         self._keep = (model_capsule, derivative_capsule, frames, bodies, table, parent, rows,
-                      quat, chain, chain_len, order, active)
+                      quat, chain, chain_len, group_start, group_end, order, active)
         self.nq, self.nv, self.nrows = api.nq, api.nv, api.ncrows
         self.c.api, self.c.dapi = api, dapi
         self.c.nv, self.c.nb, self.c.nfm = api.nv, api.nb, api.nf
@@ -159,6 +176,8 @@ cdef class Plan:
         self.c.quat = &quat[0] if quat.shape[0] else NULL
         self.c.chain = &chain[0, 0] if chain.shape[0] else NULL
         self.c.chain_len = &chain_len[0] if chain_len.shape[0] else NULL
+        self.c.group_start = &group_start[0, 0] if group_start.shape[0] else NULL
+        self.c.group_end = &group_end[0, 0] if group_end.shape[0] else NULL
         self.c.order = &order[0, 0, 0] if order.shape[0] else NULL
         self.c.active = &active[0] if active.shape[0] else NULL
 
@@ -167,7 +186,7 @@ cdef inline Py_ssize_t _workspace_size(const Ctx *c) noexcept nogil:
     """Doubles of one state's workspace (_state's layout)."""
     cdef Py_ssize_t n = c.nv, f = c.nf, m = c.m
     return (n + (c.nrows if c.nrows > 0 else 1) + m + 3 * n * n + 15 * c.nb + f * 6 * n
-            + m * n + 12 * f + 7 * f * n * 6 + 12 * f + n * n * 6 + m * 3 * n + n * n
+            + m * n + 12 * f + 7 * f * n * 6 + 12 * f + n * n * 6 + 18 * (n + 1) + m * 3 * n + n * n
             + (n + m) * 3 * n + m * n + m * m + n + n)
 
 
@@ -312,7 +331,7 @@ cdef int _state(const Ctx *c, const double *q, const double *qd, const double *t
     cdef double *A = V + 6 * nf
     cdef double *W = A + 6 * nf
     cdef double *T = W + 6 * nf  # 6 nf: V, A, W; 12 f counted for them and P, R's 12 f
-    cdef double *r2 = T + n * n * 6
+    cdef double *r2 = T + n * n * 6 + 18 * (n + 1)
     cdef double *dJtl = r2 + m * n3
     cdef double *out = dJtl + n * n
     cdef double *Y = out + (n + m) * n3
@@ -603,63 +622,71 @@ cdef void _terms(const Ctx *c, const double *J, const double *R, double *P, doub
     cdef Py_ssize_t f, i, j, k, cc, d, h, n, ii, jj, kk
     cdef const double *order
     cdef const int *ch
-    cdef double Ckj[6]
-    cdef double e1[6]
+    cdef double u[6]
+    cdef double *e1
+    cdef double e0[6]
     cdef double e2[6]
     cdef double tmp[6]
     memset(S, 0, (7 * nf * nv * 6 + 18 * nf) * sizeof(double))  # S .. W (_state's layout)
     memset(r2, 0, m * n3 * sizeof(double))
-    # --- each frame: S, V_j, Ṡ_j, V, A and their derivatives, over its chain's coordinates
+    # --- each frame: S, V_j, Ṡ_j, V, A and their derivatives along its chain (root first;
+    # a floating joint's six coordinates are one group, each on or above the others). With
+    # the chain's sums V_j = Σ_{i ⪯ j} S_i q̇_i (j's body), Vp_k (k's joint's parent body),
+    # Vv_k = Σ_{j ⪰ k} S_j q̇_j and Aa_k = Σ_{j ⪰ k} S_j a_j + Ṡ_j q̇_j, the module
+    # docstring's sums close by the Jacobi identity into ∂V/∂q_k = S_k × Vv_k and
+    # ∂A/∂q_k = S_k × Aa_k − (S_k × Vp_k) × Vv_k: O(chain) per frame.
+    cdef double *pre = T               # (n + 1, 6) prefix sums of S_j q̇_j
+    cdef double *sv = T + 6 * (nv + 1)  # (n + 1, 6) suffix sums of S_j q̇_j
+    cdef double *sa = sv + 6 * (nv + 1)  # (n + 1, 6) suffix sums of S_j a_j + Ṡ_j q̇_j
+    cdef const int *start = c.group_start  # per chain position, its joint's first and end
+    cdef const int *end = c.group_end
+    cdef double *Sj
     for f in range(nf):
-        order = c.order + f * nv * nv
         ch = c.chain + f * nv
         n = c.chain_len[f]
+        start = c.group_start + f * nv
+        end = c.group_end + f * nv
         for jj in range(n):
             j = ch[jj]
+            Sj = S + (f * nv + j) * 6
             for i in range(3):
-                S[(f * nv + j) * 6 + 3 + i] = J[(6 * f + 3 + i) * nv + j]
-            cross3(&S[(f * nv + j) * 6 + 3], &P[3 * f], tmp)
+                Sj[3 + i] = J[(6 * f + 3 + i) * nv + j]
+            cross3(Sj + 3, &P[3 * f], tmp)
             for i in range(3):
-                S[(f * nv + j) * 6 + i] = J[(6 * f + i) * nv + j] - tmp[i]
+                Sj[i] = J[(6 * f + i) * nv + j] - tmp[i]
+        for h in range(6):
+            pre[h] = 0.0
         for jj in range(n):
-            j = ch[jj]
-            for ii in range(n):
-                i = ch[ii]
-                if order[i * nv + j] != 0.0:
-                    for h in range(6):
-                        Vb[(f * nv + j) * 6 + h] += S[(f * nv + i) * 6 + h] * v[i]
-            mcross(&Vb[(f * nv + j) * 6], &S[(f * nv + j) * 6], &Sd[(f * nv + j) * 6])
+            Sj = S + (f * nv + ch[jj]) * 6
             for h in range(6):
-                V[6 * f + h] += S[(f * nv + j) * 6 + h] * v[j]
-                A[6 * f + h] += S[(f * nv + j) * 6 + h] * a[j] + Sd[(f * nv + j) * 6 + h] * v[j]
+                pre[6 * (jj + 1) + h] = pre[6 * jj + h] + Sj[h] * v[ch[jj]]
+        for jj in range(n):  # V_j (its group's end) and Ṡ_j = V_j × S_j
+            j = ch[jj]
+            for h in range(6):
+                Vb[(f * nv + j) * 6 + h] = pre[6 * end[jj] + h]
+            mcross(&Vb[(f * nv + j) * 6], &S[(f * nv + j) * 6], &Sd[(f * nv + j) * 6])
+        for h in range(6):
+            sv[6 * n + h] = 0.0
+            sa[6 * n + h] = 0.0
+        for jj in range(n - 1, -1, -1):
+            j = ch[jj]
+            Sj = S + (f * nv + j) * 6
+            for h in range(6):
+                sv[6 * jj + h] = sv[6 * (jj + 1) + h] + Sj[h] * v[j]
+                sa[6 * jj + h] = sa[6 * (jj + 1) + h] + Sj[h] * a[j] \
+                    + Sd[(f * nv + j) * 6 + h] * v[j]
+        for h in range(6):
+            V[6 * f + h] = pre[6 * n + h]
+            A[6 * f + h] = sa[h]
         for kk in range(n):
             k = ch[kk]
-            for ii in range(n):
-                i = ch[ii]
-                for h in range(6):
-                    T[(k * nv + i) * 6 + h] = 0.0
-                if order[k * nv + i] != 0.0:
-                    mcross(&S[(f * nv + k) * 6], &S[(f * nv + i) * 6], Ckj)
-                    for h in range(6):
-                        T[(k * nv + i) * 6 + h] = Ckj[h] * v[i]
-                        dVq[(f * nv + k) * 6 + h] += T[(k * nv + i) * 6 + h]
+            Sj = S + (f * nv + k) * 6
+            mcross(Sj, &sv[6 * start[kk]], &dVq[(f * nv + k) * 6])
+            mcross(Sj, &sa[6 * start[kk]], &dAq[(f * nv + k) * 6])
+            mcross(Sj, &pre[6 * start[kk]], e0)
+            mcross(e0, &sv[6 * start[kk]], e2)
             for h in range(6):
-                e1[h] = 0.0  # ∂V_j/∂q_k = Σ_{i ⪯ j} T[k, i]: a running sum down the chain,
-            ii = 0           # whose coordinates i ⪯ j are ch[0 .. the last one of j's joint]
-            for jj in range(n):
-                j = ch[jj]
-                while ii < n and order[ch[ii] * nv + j] != 0.0:
-                    for h in range(6):
-                        e1[h] += T[(k * nv + ch[ii]) * 6 + h]
-                    ii += 1
-                if order[k * nv + j] == 0.0:
-                    continue
-                mcross(&S[(f * nv + k) * 6], &S[(f * nv + j) * 6], Ckj)
-                mcross(e1, &S[(f * nv + j) * 6], tmp)
-                mcross(&Vb[(f * nv + j) * 6], Ckj, e2)
-                for h in range(6):
-                    dAq[(f * nv + k) * 6 + h] += Ckj[h] * a[j] + (tmp[h] + e2[h]) * v[j]
-            for h in range(6):
+                dAq[(f * nv + k) * 6 + h] -= e2[h]
                 dAv[(f * nv + k) * 6 + h] = dVq[(f * nv + k) * 6 + h] + Sd[(f * nv + k) * 6 + h]
     # --- the rows' derivatives and the wrenches
     cdef Frames F
@@ -679,6 +706,10 @@ cdef void _terms(const Ctx *c, const double *J, const double *R, double *P, doub
         fa, fb, frame6, local, naxes = tb[0], tb[1], tb[2], tb[3], tb[4]
         _row_value(&F, fa, fb, frame6, local, kd, x0)
         for d in range(2 * nv):
+            k = d if d < nv else d - nv
+            if c.order[(fa * nv + k) * nv + k] == 0.0 and (
+                    fb < 0 or c.order[(fb * nv + k) * nv + k] == 0.0):
+                continue  # a coordinate on neither frame's chain moves neither: r2 stays 0
             _row_derivative(&F, fa, fb, frame6, local, kd, d, dx)
             if local:  # Rᵀ (dx − w × x0) per 3-block
                 for h in range(2 if frame6 else 1):
@@ -708,24 +739,29 @@ cdef void _terms(const Ctx *c, const double *J, const double *R, double *P, doub
         if fb >= 0:  # −W on B's chain, at pB (a point loop) or pA (a frame loop)
             _wrench_at(&F, fa if frame6 else fb, fa, fb, -1.0, fw, tw, local)
         row += naxes
-    # ∂(Σ Sᵀ W)/∂q
+    # ∂(Σ Sᵀ W)/∂q: [j, k] = (S_k × S_j) · W_f = −S_j · (S_k ×* W_f) for j ⪰ k, and S_j · ∂W_f/∂q_k
     for f in range(nf):
         order = c.order + f * nv * nv
         ch = c.chain + f * nv
         n = c.chain_len[f]
         for kk in range(n):
             k = ch[kk]
+            fcross(&S[(f * nv + k) * 6], &W[6 * f], u)
             for jj in range(n):
                 j = ch[jj]
                 if order[k * nv + j] != 0.0:
-                    mcross(&S[(f * nv + k) * 6], &S[(f * nv + j) * 6], Ckj)
-                    for h in range(6):
-                        dJtl[j * nv + k] += Ckj[h] * W[6 * f + h]
-        for jj in range(n):
-            j = ch[jj]
-            for k in range(nv):
-                for h in range(6):
-                    dJtl[j * nv + k] += S[(f * nv + j) * 6 + h] * dW[(f * nv + k) * 6 + h]
+                    Sj = S + (f * nv + j) * 6
+                    dJtl[j * nv + k] -= Sj[0] * u[0] + Sj[1] * u[1] + Sj[2] * u[2] \
+                        + Sj[3] * u[3] + Sj[4] * u[4] + Sj[5] * u[5]
+        for k in range(nv):
+            e1 = dW + (f * nv + k) * 6
+            if e1[0] == 0.0 and e1[1] == 0.0 and e1[2] == 0.0 and e1[3] == 0.0 \
+                    and e1[4] == 0.0 and e1[5] == 0.0:
+                continue  # (k on no chain that the frame's wrenches turn or move with)
+            for jj in range(n):
+                Sj = S + (f * nv + ch[jj]) * 6
+                dJtl[ch[jj] * nv + k] += Sj[0] * e1[0] + Sj[1] * e1[1] + Sj[2] * e1[2] \
+                    + Sj[3] * e1[3] + Sj[4] * e1[4] + Sj[5] * e1[5]
 
 
 cdef int _kkt(const Ctx *c, const double *L, const double *Jc, const double *r2,

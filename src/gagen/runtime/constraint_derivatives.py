@@ -310,14 +310,21 @@ def _plan(dyn, mask):
     names, table, order, rows, bodies, frames, _ = _layout(dyn, mask)
     chain = np.zeros((len(names), nv), dtype=np.int32)
     chain_len = np.zeros(len(names), dtype=np.int32)
+    start, end = np.zeros_like(chain), np.zeros_like(chain)
     for f in range(len(names)):
         on = np.flatnonzero(np.diagonal(order[f]))
         chain[f, :len(on)] = on  # coordinates in q's order: a root's before its subtree's
         chain_len[f] = len(on)
+        for i in range(len(on)):  # a joint's coordinates are each other's (a floating one)
+            joined = i > 0 and order[f, on[i], on[i - 1]] != 0
+            start[f, i] = start[f, i - 1] if joined else i
+        for i in range(len(on) - 1, -1, -1):
+            joined = i + 1 < len(on) and start[f, i + 1] == start[f, i]
+            end[f, i] = end[f, i + 1] if joined else i + 1
     quat = np.array([offset for offset, _ in info.quaternions()], dtype=np.int32)
     found = _terms.Plan(dyn.module.API, dyn.derivative_module.API, frames, bodies, table,
                         np.array(dof_parents(info.bodies, nv), dtype=np.int32),
-                        np.asarray(rows, dtype=np.int32), quat, chain, chain_len,
+                        np.asarray(rows, dtype=np.int32), quat, chain, chain_len, start, end,
                         np.ascontiguousarray(order, dtype=float),
                         np.ascontiguousarray(mask, dtype=np.uint8))
     if len(kept) < 256:
