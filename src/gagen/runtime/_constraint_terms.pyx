@@ -23,6 +23,48 @@ from libc.string cimport memset
 
 cnp.import_array()
 
+cdef extern from *:
+    """
+    /* y -= sum_t coef[t] * (row idx[t] of base, stride apart), over len entries: each block
+       of y's entries is read and written once, its sources' rows summed in registers (a
+       row axpy per source would load and store y once for each) */
+    static void gagen_ct_gather(double *y, const double *base, Py_ssize_t stride,
+                                const int *idx, const double *coef, int count,
+                                Py_ssize_t len)
+    {
+        Py_ssize_t c = 0;
+        int t;
+        if (count == 0) return;
+        for (; c + 8 <= len; c += 8) {
+            double a0 = y[c], a1 = y[c + 1], a2 = y[c + 2], a3 = y[c + 3];
+            double a4 = y[c + 4], a5 = y[c + 5], a6 = y[c + 6], a7 = y[c + 7];
+            for (t = 0; t < count; ++t) {
+                const double *x = base + idx[t] * stride + c, w = coef[t];
+                a0 -= w * x[0]; a1 -= w * x[1]; a2 -= w * x[2]; a3 -= w * x[3];
+                a4 -= w * x[4]; a5 -= w * x[5]; a6 -= w * x[6]; a7 -= w * x[7];
+            }
+            y[c] = a0; y[c + 1] = a1; y[c + 2] = a2; y[c + 3] = a3;
+            y[c + 4] = a4; y[c + 5] = a5; y[c + 6] = a6; y[c + 7] = a7;
+        }
+        for (; c + 2 <= len; c += 2) {
+            double a0 = y[c], a1 = y[c + 1];
+            for (t = 0; t < count; ++t) {
+                const double *x = base + idx[t] * stride + c, w = coef[t];
+                a0 -= w * x[0]; a1 -= w * x[1];
+            }
+            y[c] = a0; y[c + 1] = a1;
+        }
+        for (; c < len; ++c) {
+            double a0 = y[c];
+            for (t = 0; t < count; ++t) a0 -= coef[t] * base[idx[t] * stride + c];
+            y[c] = a0;
+        }
+    }
+    """
+    void gagen_ct_gather(double *y, const double *base, Py_ssize_t stride, const int *idx,
+                         const double *coef, int count, Py_ssize_t len) noexcept nogil
+
+
 cdef extern from "gagen_api.h" nogil:
     enum:
         GAGEN_API_VERSION
@@ -130,6 +172,8 @@ cdef struct Ctx:
     const int *table       # (nc, TABLE) the active constraints
     int nc
     const int *parent      # (nv,) each coordinate's parent (λ)
+    const int *desc_ptr    # (nv + 1,) CSR of each coordinate's descendants (k: i ∈ λ*(k))
+    const int *desc
     const int *rows        # (m,) the active rows among every declared row
     const int *quat        # (nquat,) where each quaternion starts in q
     const int *chain       # (nf, nv) each frame's chain's coordinates, root first
@@ -151,7 +195,8 @@ cdef class Plan:
     def __init__(self, model_capsule, derivative_capsule, int[::1] frames, int[::1] bodies,
                  int[:, ::1] table, int[::1] parent, int[::1] rows, int[::1] quat,
                  int[:, ::1] chain, int[::1] chain_len, int[:, ::1] group_start,
-                 int[:, ::1] group_end, double[:, :, ::1] order, unsigned char[::1] active):
+                 int[:, ::1] group_end, double[:, :, ::1] order, unsigned char[::1] active,
+                 int[::1] desc_ptr, int[::1] desc):
         cdef const gagen_model_api *api = <const gagen_model_api *>_table(
             model_capsule, "gagen.model_api")
         cdef const gagen_derivatives_api *dapi = <const gagen_derivatives_api *>_table(
@@ -162,7 +207,8 @@ cdef class Plan:
                 frames.shape[0] and order.shape[1] != api.nv):
             raise ValueError("the layout's sizes are not the model's")
         self._keep = (model_capsule, derivative_capsule, frames, bodies, table, parent, rows,
-                      quat, chain, chain_len, group_start, group_end, order, active)
+                      quat, chain, chain_len, group_start, group_end, order, active,
+                      desc_ptr, desc)
         self.nq, self.nv, self.nrows = api.nq, api.nv, api.ncrows
         self.c.api, self.c.dapi = api, dapi
         self.c.nv, self.c.nb, self.c.nfm = api.nv, api.nb, api.nf
@@ -180,6 +226,10 @@ cdef class Plan:
         self.c.group_end = &group_end[0, 0] if group_end.shape[0] else NULL
         self.c.order = &order[0, 0, 0] if order.shape[0] else NULL
         self.c.active = &active[0] if active.shape[0] else NULL
+        if desc_ptr.shape[0] != api.nv + 1 or desc.shape[0] < desc_ptr[api.nv]:
+            raise ValueError("the descendants' sizes are not the model's")
+        self.c.desc_ptr = &desc_ptr[0]
+        self.c.desc = &desc[0] if desc.shape[0] else NULL
 
 
 cdef inline Py_ssize_t _workspace_size(const Ctx *c) noexcept nogil:
@@ -187,7 +237,7 @@ cdef inline Py_ssize_t _workspace_size(const Ctx *c) noexcept nogil:
     cdef Py_ssize_t n = c.nv, f = c.nf, m = c.m
     return (n + (c.nrows if c.nrows > 0 else 1) + m + 3 * n * n + 15 * c.nb + f * 6 * n
             + m * n + 12 * f + 7 * f * n * 6 + 12 * f + n * n * 6 + 18 * (n + 1) + m * 3 * n + n * n
-            + (n + m) * 3 * n + m * n + m * m + n + n)
+            + (n + m) * 3 * n + m * n + m * m + n + n + m)
 
 
 def derivatives(Plan plan, q, qd, tau, p, double kd, double damping):
@@ -219,9 +269,14 @@ def derivatives(Plan plan, q, qd, tau, p, double kd, double damping):
     if p is not None:
         pa = p
         pp = <const double *>cnp.PyArray_DATA(pa)
-    lead = (count,) if nd == 2 else ()
-    outs = [np.empty(lead + (n, n)) for _ in range(3)] + \
-        [np.empty(lead + (R, n)) for _ in range(3)]
+    cdef cnp.npy_intp dims[3]
+    dims[0] = count
+    dims[1] = n
+    dims[2] = n
+    cdef int lead = 1 if nd == 2 else 0
+    outs = [cnp.PyArray_EMPTY(2 + lead, &dims[1 - lead], cnp.NPY_DOUBLE, 0) for _ in range(3)]
+    dims[1] = R
+    outs += [cnp.PyArray_EMPTY(2 + lead, &dims[1 - lead], cnp.NPY_DOUBLE, 0) for _ in range(3)]
     cdef double *o[6]
     for i in range(6):
         o[i] = <double *>cnp.PyArray_DATA(<cnp.ndarray>outs[i])
@@ -230,7 +285,7 @@ def derivatives(Plan plan, q, qd, tau, p, double kd, double damping):
     cdef const double *qt = <const double *>cnp.PyArray_DATA(t)
     cdef Py_ssize_t size = _workspace_size(c) + 12 * c.nfm
     cdef double *ws = <double *>malloc(size * sizeof(double))
-    cdef int *ints = <int *>malloc((n + 1) * sizeof(int))
+    cdef int *ints = <int *>malloc((n + c.m + 1) * sizeof(int))
     cdef int status = 0
     if ws == NULL or ints == NULL:
         free(ws)
@@ -364,7 +419,7 @@ cdef int _state(const Ctx *c, const double *q, const double *qd, const double *t
             out[n3 * i + n + j] = -dIv[n * i + j]
             out[n3 * i + 2 * n + j] = 0.0
         out[n3 * i + 2 * n + i] = 1.0
-    if _kkt(c, L, Jc, r2, damping, out, Y, G, Dinv):
+    if _kkt(c, L, Jc, r2, damping, out, Y, G, Dinv, Dinv + n, ints):
         return -1
     # the outputs: q̈'s three blocks; the forces' over every declared row (inactive: zero)
     for i in range(n):
@@ -765,19 +820,26 @@ cdef void _terms(const Ctx *c, const double *J, const double *R, double *P, doub
 
 
 cdef int _kkt(const Ctx *c, const double *L, const double *Jc, const double *r2,
-              double damping, double *out, double *Y, double *G, double *Dinv) noexcept nogil:
+              double damping, double *out, double *Y, double *G, double *Dinv, double *coef,
+              int *idx) noexcept nogil:
     """[∂q̈; ∂λ] in out ((nv + m) rows of 3 nv) from r1 in its first nv rows and r2, through
     M = Lᵀ D L: w = L⁻ᵀ r1, z = D⁻¹ w; Y = J L⁻¹ (rows yᵀ = (L⁻ᵀ Jᵀ)ᵀ), G = Y D⁻¹ Yᵀ
-    (+ damping I) = J M⁻¹ Jᵀ; ∂λ = G⁻¹ (r2 − Y z); ∂q̈ = L⁻¹ (z + D⁻¹ Yᵀ ∂λ)."""
+    (+ damping I) = J M⁻¹ Jᵀ; ∂λ = G⁻¹ (r2 − Y z); ∂q̈ = L⁻¹ (z + D⁻¹ Yᵀ ∂λ). Each row
+    of out is written once per step from the rows it needs (gagen_ct_gather), along the
+    tree's ancestors and descendants and the rows' paths only."""
     cdef Py_ssize_t n = c.nv, m = c.m, n3 = 3 * c.nv, i, j, k, a, b
     cdef const int *parent = c.parent
+    cdef int t, count
     cdef double s
     cdef double *y
-    for k in range(n - 1, -1, -1):  # w = L⁻ᵀ r1: each row to its ancestors, leaves first
-        i = parent[k]
-        while i >= 0:
-            axpy(out + n3 * i, out + n3 * k, -L[n * k + i], n3)
-            i = parent[i]
+    cdef double *rhs = out + n3 * n
+    for i in range(n - 1, -1, -1):  # w = L⁻ᵀ r1: w_i = r1_i − Σ_{k below i} L_ki w_k
+        count = 0
+        for t in range(c.desc_ptr[i], c.desc_ptr[i + 1]):
+            idx[count] = c.desc[t]
+            coef[count] = L[n * c.desc[t] + i]
+            count += 1
+        gagen_ct_gather(out + n3 * i, out, n3, idx, coef, count, n3)
     for j in range(n):  # z = D⁻¹ w
         Dinv[j] = 1.0 / L[n * j + j]
         for k in range(n3):
@@ -805,29 +867,47 @@ cdef int _kkt(const Ctx *c, const double *L, const double *Jc, const double *r2,
             return -1
         for a in range(m):  # r2 − Y z, into out's last m rows
             for k in range(n3):
-                out[n3 * (n + a) + k] = r2[n3 * a + k]
+                rhs[n3 * a + k] = r2[n3 * a + k]
+            count = 0
             for j in range(n):
                 if Y[n * a + j] != 0.0:
-                    axpy(out + n3 * (n + a), out + n3 * j, -Y[n * a + j], n3)
+                    idx[count] = <int>j
+                    coef[count] = Y[n * a + j]
+                    count += 1
+            gagen_ct_gather(rhs + n3 * a, out, n3, idx, coef, count, n3)
         for a in range(m):  # ∂λ = G⁻¹ (…), G = Lg Lgᵀ: forward, then back
             for b in range(a):
-                axpy(out + n3 * (n + a), out + n3 * (n + b), -G[m * a + b], n3)
+                idx[b] = <int>b
+                coef[b] = G[m * a + b]
+            gagen_ct_gather(rhs + n3 * a, rhs, n3, idx, coef, <int>a, n3)
             s = 1.0 / G[m * a + a]
             for k in range(n3):
-                out[n3 * (n + a) + k] *= s
+                rhs[n3 * a + k] *= s
         for a in range(m - 1, -1, -1):
+            count = 0
             for b in range(a + 1, m):
-                axpy(out + n3 * (n + a), out + n3 * (n + b), -G[m * b + a], n3)
+                idx[count] = <int>b
+                coef[count] = G[m * b + a]
+                count += 1
+            gagen_ct_gather(rhs + n3 * a, rhs, n3, idx, coef, count, n3)
             s = 1.0 / G[m * a + a]
             for k in range(n3):
-                out[n3 * (n + a) + k] *= s
+                rhs[n3 * a + k] *= s
         for j in range(n):  # z += D⁻¹ Yᵀ ∂λ
+            count = 0
             for a in range(m):
                 if Y[n * a + j] != 0.0:
-                    axpy(out + n3 * j, out + n3 * (n + a), Y[n * a + j] * Dinv[j], n3)
+                    idx[count] = <int>a
+                    coef[count] = -Y[n * a + j] * Dinv[j]
+                    count += 1
+            gagen_ct_gather(out + n3 * j, rhs, n3, idx, coef, count, n3)
     for k in range(n):  # ∂q̈ = L⁻¹ z: root first, each row from its ancestors
+        count = 0
         i = parent[k]
         while i >= 0:
-            axpy(out + n3 * k, out + n3 * i, -L[n * k + i], n3)
+            idx[count] = <int>i
+            coef[count] = L[n * k + i]
+            count += 1
             i = parent[i]
+        gagen_ct_gather(out + n3 * k, out, n3, idx, coef, count, n3)
     return 0

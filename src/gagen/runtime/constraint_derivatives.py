@@ -280,18 +280,34 @@ def derivatives(dyn, q, qd, tau, p, mask, kd: float, damping: float):
             dforces[..., :nv], dforces[..., nv: 2 * nv], dforces[..., 2 * nv:])
 
 
+def compiled_defaults(dyn, q, qd, tau, active, baumgarte, damping, p):
+    """A compiled model's call with every constraint active, no Baumgarte gains, no damping
+    and the default parameters, straight into the C (its arguments need no checks); None
+    for any other call or where the C refuses (the caller then takes the checked path)."""
+    if active is not None or p is not None or _terms is None or damping != 0.0 \
+            or type(baumgarte) is not tuple or baumgarte != (0.0, 0.0):
+        return None
+    plan = dyn.__dict__.get("_constraint_derivative_plan_all")
+    if plan is None:
+        plan = dyn.__dict__["_constraint_derivative_plan_all"] = _plan(
+            dyn, np.ones(len(dyn.info.constraints), dtype=bool))
+    return _terms.derivatives(plan, q, qd, tau, None, 0.0, 0.0)
+
+
 def _compiled(dyn, q, qd, tau, p, mask, kd, damping):
     """The six derivatives by _constraint_terms's C, at one state or stacked ones (None
     where it refuses an input or a state: the NumPy path then raises or answers)."""
     plan = _plan(dyn, mask)
-    if type(q) is not np.ndarray or type(qd) is not np.ndarray or type(tau) is not np.ndarray:
-        from .inputs import as_states
-
-        (q, qd, tau), _ = as_states(dyn._sizes, q, qd, tau, names=("q", "qd", "tau"))
     if p is not None:
         p = np.ascontiguousarray(dyn.parameter_vector(p), dtype=float)
         if not np.isfinite(p).all():
             return None
+    found = _terms.derivatives(plan, q, qd, tau, p, kd, damping)
+    if found is not None:
+        return found
+    from .inputs import as_states  # lists, other dtypes, strides: converted, or the error
+
+    (q, qd, tau), _ = as_states(dyn._sizes, q, qd, tau, names=("q", "qd", "tau"))
     return _terms.derivatives(plan, np.ascontiguousarray(q, dtype=float),
                               np.ascontiguousarray(qd, dtype=float),
                               np.ascontiguousarray(tau, dtype=float), p, kd, damping)
@@ -322,11 +338,20 @@ def _plan(dyn, mask):
             joined = i + 1 < len(on) and start[f, i + 1] == start[f, i]
             end[f, i] = end[f, i + 1] if joined else i + 1
     quat = np.array([offset for offset, _ in info.quaternions()], dtype=np.int32)
+    parents = dof_parents(info.bodies, nv)
+    below: list[list[int]] = [[] for _ in range(nv)]  # each coordinate's descendants
+    for k in range(nv):
+        i = parents[k]
+        while i >= 0:
+            below[i].append(k)
+            i = parents[i]
+    desc_ptr = np.cumsum([0] + [len(b) for b in below]).astype(np.int32)
+    desc = np.array([k for b in below for k in b] or [0], dtype=np.int32)
     found = _terms.Plan(dyn.module.API, dyn.derivative_module.API, frames, bodies, table,
-                        np.array(dof_parents(info.bodies, nv), dtype=np.int32),
+                        np.array(parents, dtype=np.int32),
                         np.asarray(rows, dtype=np.int32), quat, chain, chain_len, start, end,
                         np.ascontiguousarray(order, dtype=float),
-                        np.ascontiguousarray(mask, dtype=np.uint8))
+                        np.ascontiguousarray(mask, dtype=np.uint8), desc_ptr, desc)
     if len(kept) < 256:
         kept[key] = found
     return found
