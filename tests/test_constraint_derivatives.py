@@ -332,6 +332,19 @@ def test_the_defaults_call_equals_the_checked_one(cache_dir, monkeypatch):
         tree.constrained_forward_dynamics_derivatives(q, v, tau)
 
 
+def test_dependent_rows_are_refused_as_the_dynamics_refuse_them(anymal):
+    """The C's Delassus factor tests its pivots as the model's constrained dynamics do: a
+    foot held twice is the same one-line error, and with damping a damped answer."""
+    q, v, tau = standing(anymal, np.random.default_rng(29))
+    twice = mask(anymal, "LF", "LF_local", "RH")
+    with pytest.raises(gagen.SingularConstraintError, match="linearly dependent"):
+        anymal.constrained_forward_dynamics(q, v, tau, twice)
+    with pytest.raises(gagen.SingularConstraintError, match="linearly dependent"):
+        anymal.constrained_forward_dynamics_derivatives(q, v, tau, twice)
+    damped = anymal.constrained_forward_dynamics_derivatives(q, v, tau, twice, damping=0.1)
+    assert all(np.isfinite(x).all() for x in damped)
+
+
 @pytest.mark.parametrize("backend", ["lambdify", "compiled"])
 def test_a_bad_floating_state_is_refused_with_one_line(backend, cache_dir):
     dyn = load_tree(2, backend, cache_dir)

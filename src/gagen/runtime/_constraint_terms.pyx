@@ -27,7 +27,14 @@ cdef extern from *:
     """
     /* y -= sum_t coef[t] * (row idx[t] of base, stride apart), over len entries: each block
        of y's entries is read and written once, its sources' rows summed in registers (a
-       row axpy per source would load and store y once for each) */
+       row axpy per source would load and store y once for each). On x86-64 with GCC or
+       clang under glibc, a clone for AVX2 CPUs (chosen when the module loads) runs the same
+       operations in the same order four wide: its results are the default's, bit for bit
+       (no FMA contraction: the target adds no "fma"). */
+    #if defined(__x86_64__) && defined(__linux__) && (defined(__GNUC__) || defined(__clang__)) \
+        && !defined(GAGEN_NO_CLONES)
+    __attribute__((target_clones("avx2", "default")))
+    #endif
     static void gagen_ct_gather(double *y, const double *base, Py_ssize_t stride,
                                 const int *idx, const double *coef, int count,
                                 Py_ssize_t len)
@@ -74,6 +81,8 @@ cdef extern from "gagen_api.h" nogil:
         int nq, nv, nb, nf, np
         const double *parameter_defaults
         void (*mass_matrix)(const double *q, const double *p, double *M) noexcept nogil
+        void (*forcing)(const double *q, const double *qd, const double *tau,
+                        const double *p, double *F) noexcept nogil
         void (*placements)(const double *q, const double *p, double *X) noexcept nogil
         void (*frame_offsets)(const double *p, double *F) noexcept nogil
         int (*frame_jacobians)(const double *q, const double *p, int count, const int *frames,
@@ -81,6 +90,8 @@ cdef extern from "gagen_api.h" nogil:
         int nc, ncrows
         int (*constraint_jacobian)(const double *q, const double *p,
                                    const unsigned char *active, double *J) noexcept nogil
+        int (*constraint_drift)(const double *q, const double *qd, const double *p,
+                                const unsigned char *active, double *drift) noexcept nogil
         int (*constrained_forward_dynamics)(const double *q, const double *qd,
                                             const double *tau, const double *p,
                                             const unsigned char *active, double kp,
@@ -235,7 +246,7 @@ cdef class Plan:
 cdef inline Py_ssize_t _workspace_size(const Ctx *c) noexcept nogil:
     """Doubles of one state's workspace (_state's layout)."""
     cdef Py_ssize_t n = c.nv, f = c.nf, m = c.m
-    return (n + (c.nrows if c.nrows > 0 else 1) + m + 3 * n * n + 15 * c.nb + f * 6 * n
+    return (n + (c.nrows if c.nrows > n else n) + m + 3 * n * n + 15 * c.nb + f * 6 * n
             + m * n + 12 * f + 7 * f * n * 6 + 12 * f + n * n * 6 + 18 * (n + 1) + m * 3 * n + n * n
             + (n + m) * 3 * n + m * n + m * m + n + n + m)
 
@@ -250,6 +261,8 @@ def derivatives(Plan plan, q, qd, tau, p, double kd, double damping):
     cdef Ctx *c = &plan.c
     cdef Py_ssize_t n = c.nv, nq = plan.nq, R = c.nrows, count, i
     cdef cnp.ndarray a, b, t, pa
+    if not (kd >= 0.0 and damping >= 0.0):
+        return None
     for x in (q, qd, tau):
         if type(x) is not np.ndarray or (<cnp.ndarray>x).dtype.num != cnp.NPY_DOUBLE \
                 or not cnp.PyArray_IS_C_CONTIGUOUS(<cnp.ndarray>x):
@@ -307,15 +320,17 @@ def derivatives(Plan plan, q, qd, tau, p, double kd, double damping):
     return tuple(outs)
 
 
-cdef int _ltdl(double *M, const int *parent, Py_ssize_t n) noexcept nogil:
+cdef int _ltdl(double *M, const int *parent, Py_ssize_t n, double *diagonal) noexcept nogil:
     """M = Lᵀ D L in place (the model's gagen_ltdl: the same steps, from the last
-    coordinate up, only along each coordinate's ancestors); -1 at a pivot not clearly
-    positive."""
+    coordinate up, only along each coordinate's ancestors, and its test of a pivot against
+    M's diagonal entry); -1 at a pivot not clearly positive."""
     cdef Py_ssize_t k, i, j
     cdef double d, x
+    for k in range(n):
+        diagonal[k] = M[n * k + k]
     for k in range(n - 1, -1, -1):
         d = M[n * k + k]
-        if not d > 0.0:
+        if not (d > 1e-13 * diagonal[k] and diagonal[k] > 0.0):
             return -1
         i = parent[k]
         while i >= 0:
@@ -329,23 +344,78 @@ cdef int _ltdl(double *M, const int *parent, Py_ssize_t n) noexcept nogil:
     return 0
 
 
-cdef int _cholesky(double *A, Py_ssize_t n) noexcept nogil:
-    """A's lower Cholesky factor in place (its upper triangle left); -1 at a pivot <= 0."""
-    cdef Py_ssize_t i, j, k
+cdef inline void _back(const double *L, const int *parent, Py_ssize_t n,
+                       double *x) noexcept nogil:
+    """x ← L⁻ᵀ x: from the last coordinate up, each to its ancestors (gagen_cn_back)."""
+    cdef Py_ssize_t k, i
+    for k in range(n - 1, -1, -1):
+        if x[k] != 0.0:
+            i = parent[k]
+            while i >= 0:
+                x[i] -= L[n * k + i] * x[k]
+                i = parent[i]
+
+
+cdef inline void _forward(const double *L, const int *parent, Py_ssize_t n,
+                          double *x) noexcept nogil:
+    """x ← L⁻¹ x: from the first coordinate down (gagen_cn_forward)."""
+    cdef Py_ssize_t k, i
     cdef double s
-    for j in range(n):
-        s = A[n * j + j]
+    for k in range(n):
+        s = x[k]
+        i = parent[k]
+        while i >= 0:
+            s -= L[n * k + i] * x[i]
+            i = parent[i]
+        x[k] = s
+
+
+cdef int _delassus(const double *Y, const double *Dinv, Py_ssize_t n, Py_ssize_t m,
+                   double damping, double *G) noexcept nogil:
+    """G = Y D⁻¹ Yᵀ + damping I factored in place as Lg Dg Lgᵀ (Lg's unit lower triangle
+    below the diagonal, Dg on it); -1 at a pivot not above GAGEN_TS_PIVOT (1e-11) times its
+    diagonal entry (the model's constrained dynamics then answers with its error)."""
+    cdef Py_ssize_t a, b, j, k
+    cdef double s, d, diag
+    for a in range(m):
+        for b in range(a + 1):
+            s = 0.0
+            for j in range(n):
+                s += Y[n * a + j] * Dinv[j] * Y[n * b + j]
+            G[m * a + b] = s
+        G[m * a + a] += damping
+    for j in range(m):  # the lower triangle, column by column (gagen_cn_kkt's steps)
+        diag = G[m * j + j]
+        d = diag
         for k in range(j):
-            s -= A[n * j + k] * A[n * j + k]
-        if not s > 0.0:
+            d -= G[m * j + k] * G[m * j + k] * G[m * k + k]
+        if not d > 1e-11 * diag:
             return -1
-        s = sqrt(s)
-        A[n * j + j] = s
-        for i in range(j + 1, n):
+        G[m * j + j] = d
+        for a in range(j + 1, m):
+            s = G[m * a + j]
             for k in range(j):
-                A[n * i + j] -= A[n * i + k] * A[n * j + k]
-            A[n * i + j] /= s
+                s -= G[m * a + k] * G[m * j + k] * G[m * k + k]
+            G[m * a + j] = s / d
     return 0
+
+
+cdef void _solve_ldlt(const double *G, Py_ssize_t m, double *x) noexcept nogil:
+    """x ← G⁻¹ x with G = Lg Dg Lgᵀ (_delassus)."""
+    cdef Py_ssize_t a, b
+    cdef double s
+    for a in range(m):
+        s = x[a]
+        for b in range(a):
+            s -= G[m * a + b] * x[b]
+        x[a] = s
+    for a in range(m):
+        x[a] /= G[m * a + a]
+    for a in range(m - 1, -1, -1):
+        s = x[a]
+        for b in range(a + 1, m):
+            s -= G[m * b + a] * x[b]
+        x[a] = s
 
 
 cdef int _state(const Ctx *c, const double *q, const double *qd, const double *tau,
@@ -366,7 +436,7 @@ cdef int _state(const Ctx *c, const double *q, const double *qd, const double *t
     # the workspace (_workspace_size's sum)
     cdef double *qdd = ws
     cdef double *forces = qdd + n
-    cdef double *lam = forces + (R if R > 0 else 1)
+    cdef double *lam = forces + (R if R > n else n)
     cdef double *dIq = lam + m
     cdef double *dIv = dIq + n * n
     cdef double *L = dIv + n * n
@@ -392,23 +462,55 @@ cdef int _state(const Ctx *c, const double *q, const double *qd, const double *t
     cdef double *Y = out + (n + m) * n3
     cdef double *G = Y + m * n
     cdef double *Dinv = G + m * m
-    rc = c.api.constrained_forward_dynamics(q, qd, tau, p, c.active, 0.0, kd, damping, qdd,
-                                            forces)
-    if rc != 0:
-        return rc
-    c.dapi.inverse_dynamics_derivatives(q, qd, qdd, p, dIq, dIv)
+    # the constrained forward dynamics (the model's constrained_forward_dynamics, whose
+    # factors the derivatives reuse): M = Lᵀ D L, f = L⁻ᵀ (τ − bias), Y = J L⁻¹,
+    # G = Y D⁻¹ Yᵀ + damping I = Lg Dg Lgᵀ, λ = G⁻¹ (−drift − kd J q̇ − Y D⁻¹ f),
+    # q̈ = L⁻¹ D⁻¹ (f + Yᵀ λ)
     c.api.mass_matrix(q, p, L)
-    if _ltdl(L, c.parent, n):
+    if _ltdl(L, c.parent, n, Dinv):
         return -1
+    for j in range(n):
+        Dinv[j] = 1.0 / L[n * j + j]
+    c.api.forcing(q, qd, tau, p, qdd)
+    _back(L, c.parent, n, qdd)
+    if m:
+        c.api.constraint_jacobian(q, p, c.active, Jc)
+        c.api.constraint_drift(q, qd, p, c.active, lam)
+        for r in range(m):
+            n2 = 0.0
+            if kd != 0.0:
+                for j in range(n):
+                    n2 += Jc[n * r + j] * qd[j]
+            lam[r] = -lam[r] - kd * n2
+        for r in range(m):  # Y's rows: L⁻ᵀ of J's
+            for j in range(n):
+                Y[n * r + j] = Jc[n * r + j]
+            _back(L, c.parent, n, Y + n * r)
+            n2 = 0.0
+            for j in range(n):
+                n2 += Y[n * r + j] * Dinv[j] * qdd[j]
+            lam[r] -= n2
+        if _delassus(Y, Dinv, n, m, damping, G):
+            return -1
+        _solve_ldlt(G, m, lam)
+        for j in range(n):
+            n2 = qdd[j]
+            for r in range(m):
+                n2 += Y[n * r + j] * lam[r]
+            forces[j] = n2 * Dinv[j]  # (forces: scratch here)
+    else:
+        for j in range(n):
+            forces[j] = qdd[j] * Dinv[j]
+    for j in range(n):
+        qdd[j] = forces[j]
+    _forward(L, c.parent, n, qdd)
+    c.dapi.inverse_dynamics_derivatives(q, qd, qdd, p, dIq, dIv)
     memset(dJtl, 0, n * n * sizeof(double))
     if nf:
         c.api.placements(q, p, X)
         rc = c.api.frame_jacobians(q, p, <int>nf, c.frames, LOCAL_WORLD_ALIGNED, J)
         if rc != 0:
             return rc
-        c.api.constraint_jacobian(q, p, c.active, Jc)
-        for r in range(m):
-            lam[r] = forces[c.rows[r]]
         _placements(c, X, Fo, Rf, P)
         _terms(c, J, Rf, P, S, Vb, Sd, dVq, dAq, dAv, dW, V, A, W, T, qd, qdd, lam, kd, r2,
                dJtl)
@@ -419,8 +521,7 @@ cdef int _state(const Ctx *c, const double *q, const double *qd, const double *t
             out[n3 * i + n + j] = -dIv[n * i + j]
             out[n3 * i + 2 * n + j] = 0.0
         out[n3 * i + 2 * n + i] = 1.0
-    if _kkt(c, L, Jc, r2, damping, out, Y, G, Dinv, Dinv + n, ints):
-        return -1
+    _kkt(c, L, r2, out, Y, G, Dinv, Dinv + n, ints)
     # the outputs: q̈'s three blocks; the forces' over every declared row (inactive: zero)
     for i in range(n):
         for j in range(n):
@@ -819,19 +920,18 @@ cdef void _terms(const Ctx *c, const double *J, const double *R, double *P, doub
                     + Sj[3] * e1[3] + Sj[4] * e1[4] + Sj[5] * e1[5]
 
 
-cdef int _kkt(const Ctx *c, const double *L, const double *Jc, const double *r2,
-              double damping, double *out, double *Y, double *G, double *Dinv, double *coef,
-              int *idx) noexcept nogil:
+cdef void _kkt(const Ctx *c, const double *L, const double *r2, double *out,
+               const double *Y, const double *G, const double *Dinv, double *coef,
+               int *idx) noexcept nogil:
     """[∂q̈; ∂λ] in out ((nv + m) rows of 3 nv) from r1 in its first nv rows and r2, through
-    M = Lᵀ D L: w = L⁻ᵀ r1, z = D⁻¹ w; Y = J L⁻¹ (rows yᵀ = (L⁻ᵀ Jᵀ)ᵀ), G = Y D⁻¹ Yᵀ
-    (+ damping I) = J M⁻¹ Jᵀ; ∂λ = G⁻¹ (r2 − Y z); ∂q̈ = L⁻¹ (z + D⁻¹ Yᵀ ∂λ). Each row
-    of out is written once per step from the rows it needs (gagen_ct_gather), along the
-    tree's ancestors and descendants and the rows' paths only."""
+    M = Lᵀ D L and G = J M⁻¹ Jᵀ (+ damping I) = Lg Dg Lgᵀ as _state factored them, with
+    Y = J L⁻¹: w = L⁻ᵀ r1, z = D⁻¹ w; ∂λ = G⁻¹ (r2 − Y z); ∂q̈ = L⁻¹ (z + D⁻¹ Yᵀ ∂λ).
+    Each row of out is written once per step from the rows it needs (gagen_ct_gather),
+    along the tree's ancestors and descendants and the rows' paths only."""
     cdef Py_ssize_t n = c.nv, m = c.m, n3 = 3 * c.nv, i, j, k, a, b
     cdef const int *parent = c.parent
     cdef int t, count
     cdef double s
-    cdef double *y
     cdef double *rhs = out + n3 * n
     for i in range(n - 1, -1, -1):  # w = L⁻ᵀ r1: w_i = r1_i − Σ_{k below i} L_ki w_k
         count = 0
@@ -841,30 +941,9 @@ cdef int _kkt(const Ctx *c, const double *L, const double *Jc, const double *r2,
             count += 1
         gagen_ct_gather(out + n3 * i, out, n3, idx, coef, count, n3)
     for j in range(n):  # z = D⁻¹ w
-        Dinv[j] = 1.0 / L[n * j + j]
         for k in range(n3):
             out[n3 * j + k] *= Dinv[j]
     if m:
-        for a in range(m):  # Y's rows: L⁻ᵀ of J's, leaves first
-            y = Y + n * a
-            for j in range(n):
-                y[j] = Jc[n * a + j]
-            for k in range(n - 1, -1, -1):
-                if y[k] != 0.0:
-                    i = parent[k]
-                    while i >= 0:
-                        y[i] -= L[n * k + i] * y[k]
-                        i = parent[i]
-        for a in range(m):
-            for b in range(a + 1):
-                s = 0.0
-                for j in range(n):
-                    s += Y[n * a + j] * Dinv[j] * Y[n * b + j]
-                G[m * a + b] = s
-                G[m * b + a] = s
-            G[m * a + a] += damping
-        if _cholesky(G, m):
-            return -1
         for a in range(m):  # r2 − Y z, into out's last m rows
             for k in range(n3):
                 rhs[n3 * a + k] = r2[n3 * a + k]
@@ -875,24 +954,21 @@ cdef int _kkt(const Ctx *c, const double *L, const double *Jc, const double *r2,
                     coef[count] = Y[n * a + j]
                     count += 1
             gagen_ct_gather(rhs + n3 * a, out, n3, idx, coef, count, n3)
-        for a in range(m):  # ∂λ = G⁻¹ (…), G = Lg Lgᵀ: forward, then back
+        for a in range(m):  # ∂λ = G⁻¹ (…), G = Lg Dg Lgᵀ: forward, Dg⁻¹, then back
             for b in range(a):
                 idx[b] = <int>b
                 coef[b] = G[m * a + b]
             gagen_ct_gather(rhs + n3 * a, rhs, n3, idx, coef, <int>a, n3)
+        for a in range(m - 1, -1, -1):
             s = 1.0 / G[m * a + a]
             for k in range(n3):
                 rhs[n3 * a + k] *= s
-        for a in range(m - 1, -1, -1):
             count = 0
             for b in range(a + 1, m):
                 idx[count] = <int>b
                 coef[count] = G[m * b + a]
                 count += 1
             gagen_ct_gather(rhs + n3 * a, rhs, n3, idx, coef, count, n3)
-            s = 1.0 / G[m * a + a]
-            for k in range(n3):
-                rhs[n3 * a + k] *= s
         for j in range(n):  # z += D⁻¹ Yᵀ ∂λ
             count = 0
             for a in range(m):
@@ -910,4 +986,3 @@ cdef int _kkt(const Ctx *c, const double *L, const double *Jc, const double *r2,
             count += 1
             i = parent[i]
         gagen_ct_gather(out + n3 * k, out, n3, idx, coef, count, n3)
-    return 0
