@@ -4,13 +4,16 @@
 stacked ones: gagen.runtime.constraint_derivatives's equations (its docstring; its NumPy is
 the reference this follows, and the path of the lambdify backend).
 
-Per state, with the GIL released and one workspace per call: the model's own kernels through
-its API tables (gagen_api.h, as _native.pyx calls them: the constrained forward dynamics,
-the mass matrix, placements, frame and constraint Jacobians, and the derivative module's
-inverse dynamics derivatives), then the constraint terms along the constrained frames'
-chains, then the KKT solves for all 3 nv right-hand sides at once through M's tree-sparse
-factors M = Lᵀ D L (no fill-in outside each coordinate's ancestors, as the model's
-gagen_ltdl) and the active rows' Delassus matrix G = (J L⁻¹) D⁻¹ (J L⁻¹)ᵀ."""
+Per state, with the GIL released and one workspace per call: the model's kernels through
+its API tables (gagen_api.h, as _native.pyx calls them: M, the bias forces, placements and
+frame Jacobians, and the derivative module's inverse dynamics derivatives); the
+constrained frames' chains (their twists, velocities and accelerations, O(chain) each),
+which give the active rows' J and drift; the constrained forward dynamics through M's
+tree-sparse factors M = Lᵀ D L (no fill-in outside each coordinate's ancestors, as the
+model's gagen_ltdl) and the Delassus matrix's G = (J L⁻¹) D⁻¹ (J L⁻¹)ᵀ = Lg Dg Lgᵀ, with
+the model's pivot tests (a state they refuse goes back to the caller, whose checked path
+raises the model's error); then the constraint terms and the KKT solves for all 3 nv
+right-hand sides at once on the same factors."""
 
 import numpy as np
 cimport numpy as cnp
@@ -88,15 +91,6 @@ cdef extern from "gagen_api.h" nogil:
         int (*frame_jacobians)(const double *q, const double *p, int count, const int *frames,
                                int reference, double *J) noexcept nogil
         int nc, ncrows
-        int (*constraint_jacobian)(const double *q, const double *p,
-                                   const unsigned char *active, double *J) noexcept nogil
-        int (*constraint_drift)(const double *q, const double *qd, const double *p,
-                                const unsigned char *active, double *drift) noexcept nogil
-        int (*constrained_forward_dynamics)(const double *q, const double *qd,
-                                            const double *tau, const double *p,
-                                            const unsigned char *active, double kp,
-                                            double kd, double damping, double *qdd,
-                                            double *forces) noexcept nogil
     ctypedef struct gagen_derivatives_api:
         int version
         int nq, nv, np
@@ -462,8 +456,8 @@ cdef int _state(const Ctx *c, const double *q, const double *qd, const double *t
     cdef double *Y = out + (n + m) * n3
     cdef double *G = Y + m * n
     cdef double *Dinv = G + m * m
-    # the constrained forward dynamics (the model's constrained_forward_dynamics, whose
-    # factors the derivatives reuse): M = Lᵀ D L, f = L⁻ᵀ (τ − bias), Y = J L⁻¹,
+    # the constrained forward dynamics (the model's constrained_forward_dynamics: the same
+    # steps, on factors the derivatives reuse): M = Lᵀ D L, f = L⁻ᵀ (τ − bias), Y = J L⁻¹,
     # G = Y D⁻¹ Yᵀ + damping I = Lg Dg Lgᵀ, λ = G⁻¹ (−drift − kd J q̇ − Y D⁻¹ f),
     # q̈ = L⁻¹ D⁻¹ (f + Yᵀ λ)
     c.api.mass_matrix(q, p, L)
@@ -473,15 +467,14 @@ cdef int _state(const Ctx *c, const double *q, const double *qd, const double *t
         Dinv[j] = 1.0 / L[n * j + j]
     c.api.forcing(q, qd, tau, p, qdd)
     _back(L, c.parent, n, qdd)
+    if nf:  # the frames' chains at q̈ = 0: J and −(drift + kd J q̇) of the active rows
+        c.api.placements(q, p, X)
+        rc = c.api.frame_jacobians(q, p, <int>nf, c.frames, LOCAL_WORLD_ALIGNED, J)
+        if rc != 0:
+            return rc
+        _placements(c, X, Fo, Rf, P)
+        _motion(c, J, Rf, P, S, Vb, Sd, V, A, T, qd, kd, Jc, lam)
     if m:
-        c.api.constraint_jacobian(q, p, c.active, Jc)
-        c.api.constraint_drift(q, qd, p, c.active, lam)
-        for r in range(m):
-            n2 = 0.0
-            if kd != 0.0:
-                for j in range(n):
-                    n2 += Jc[n * r + j] * qd[j]
-            lam[r] = -lam[r] - kd * n2
         for r in range(m):  # Y's rows: L⁻ᵀ of J's
             for j in range(n):
                 Y[n * r + j] = Jc[n * r + j]
@@ -507,11 +500,6 @@ cdef int _state(const Ctx *c, const double *q, const double *qd, const double *t
     c.dapi.inverse_dynamics_derivatives(q, qd, qdd, p, dIq, dIv)
     memset(dJtl, 0, n * n * sizeof(double))
     if nf:
-        c.api.placements(q, p, X)
-        rc = c.api.frame_jacobians(q, p, <int>nf, c.frames, LOCAL_WORLD_ALIGNED, J)
-        if rc != 0:
-            return rc
-        _placements(c, X, Fo, Rf, P)
         _terms(c, J, Rf, P, S, Vb, Sd, dVq, dAq, dAv, dW, V, A, W, T, qd, qdd, lam, kd, r2,
                dJtl)
     # r1 = [∂(Jᵀλ)/∂q − ∂ID/∂q | −∂ID/∂q̇ | I]
@@ -768,39 +756,25 @@ cdef void _wrench_at(const Frames *F, int fp, int fa, int fchain, double sign, d
 
 
 
-cdef void _terms(const Ctx *c, const double *J, const double *R, double *P, double *S,
-                 double *Vb, double *Sd, double *dVq, double *dAq, double *dAv, double *dW,
-                 double *V, double *A, double *W, double *T, const double *v, const double *a,
-                 const double *lam, double kd, double *r2, double *dJtl) noexcept nogil:
-    """r2 = [−∂a_c/∂q | −∂a_c/∂q̇ | 0] (m, 3 nv) and dJtl += ∂(Jᵀ λ)/∂q (nv, nv), λ held
-    (the module docstring of gagen.runtime.constraint_derivatives has the sums)."""
-    cdef Py_ssize_t nv = c.nv, nf = c.nf, n3 = 3 * c.nv, m = c.m
-    cdef Py_ssize_t f, i, j, k, cc, d, h, n, ii, jj, kk
-    cdef const double *order
+cdef void _motion(const Ctx *c, const double *J, const double *R, const double *P,
+                  double *S, double *Vb, double *Sd, double *V, double *A, double *T,
+                  const double *v, double kd, double *Jc, double *rhs) noexcept nogil:
+    """Each frame's chain at q̈ = 0 (zeroing S .. W of _state's layout first): S_j (its
+    twists at the world's origin), V_j (j's body's velocity), Ṡ_j = V_j × S_j, V, and A = Σ
+    Ṡ_j q̇_j; then the active rows' J (m, nv) and rhs = −(J̇ q̇ + kd J q̇) (gagen_cn_one's
+    rows: a point's velocity, or a frame's twist at A's origin, less B's; in A's axes for
+    "local"), the right-hand side of the constrained dynamics."""
+    cdef Py_ssize_t nv = c.nv, nf = c.nf
+    cdef Py_ssize_t f, i, j, h, n, jj, d, cc
     cdef const int *ch
-    cdef double u[6]
-    cdef double *e1
-    cdef double e0[6]
-    cdef double e2[6]
-    cdef double tmp[6]
-    memset(S, 0, (7 * nf * nv * 6 + 18 * nf) * sizeof(double))  # S .. W (_state's layout)
-    memset(r2, 0, m * n3 * sizeof(double))
-    # --- each frame: S, V_j, Ṡ_j, V, A and their derivatives along its chain (root first;
-    # a floating joint's six coordinates are one group, each on or above the others). With
-    # the chain's sums V_j = Σ_{i ⪯ j} S_i q̇_i (j's body), Vp_k (k's joint's parent body),
-    # Vv_k = Σ_{j ⪰ k} S_j q̇_j and Aa_k = Σ_{j ⪰ k} S_j a_j + Ṡ_j q̇_j, the module
-    # docstring's sums close by the Jacobi identity into ∂V/∂q_k = S_k × Vv_k and
-    # ∂A/∂q_k = S_k × Aa_k − (S_k × Vp_k) × Vv_k: O(chain) per frame.
-    cdef double *pre = T               # (n + 1, 6) prefix sums of S_j q̇_j
-    cdef double *sv = T + 6 * (nv + 1)  # (n + 1, 6) suffix sums of S_j q̇_j
-    cdef double *sa = sv + 6 * (nv + 1)  # (n + 1, 6) suffix sums of S_j a_j + Ṡ_j q̇_j
-    cdef const int *start = c.group_start  # per chain position, its joint's first and end
-    cdef const int *end = c.group_end
+    cdef const int *end
     cdef double *Sj
+    cdef double *pre = T
+    cdef double tmp[6]
+    memset(S, 0, (7 * nf * nv * 6 + 18 * nf) * sizeof(double))
     for f in range(nf):
         ch = c.chain + f * nv
         n = c.chain_len[f]
-        start = c.group_start + f * nv
         end = c.group_end + f * nv
         for jj in range(n):
             j = ch[jj]
@@ -816,14 +790,109 @@ cdef void _terms(const Ctx *c, const double *J, const double *R, double *P, doub
             Sj = S + (f * nv + ch[jj]) * 6
             for h in range(6):
                 pre[6 * (jj + 1) + h] = pre[6 * jj + h] + Sj[h] * v[ch[jj]]
-        for jj in range(n):  # V_j (its group's end) and Ṡ_j = V_j × S_j
+        for h in range(6):
+            V[6 * f + h] = pre[6 * n + h]
+            A[6 * f + h] = 0.0
+        for jj in range(n):  # V_j (its group's end), Ṡ_j = V_j × S_j, A = Σ Ṡ_j q̇_j
             j = ch[jj]
             for h in range(6):
                 Vb[(f * nv + j) * 6 + h] = pre[6 * end[jj] + h]
             mcross(&Vb[(f * nv + j) * 6], &S[(f * nv + j) * 6], &Sd[(f * nv + j) * 6])
+            for h in range(6):
+                A[6 * f + h] += Sd[(f * nv + j) * 6 + h] * v[j]
+    cdef Frames F
+    F.nv = nv
+    F.J, F.P, F.S, F.V, F.A = <double *>J, <double *>P, S, V, A
+    cdef int fa, fb, frame6, local, naxes, row = 0
+    cdef const int *tb
+    cdef double x0[6]
+    for cc in range(c.nc):
+        tb = c.table + TABLE * cc
+        fa, fb, frame6, local, naxes = tb[0], tb[1], tb[2], tb[3], tb[4]
+        _row_value(&F, fa, fb, frame6, local, kd, x0)
+        if local:
+            _turn(R + 9 * fa, x0, 2 if frame6 else 1)
+        for i in range(naxes):
+            rhs[row + i] = -x0[tb[5 + i]]
+        for d in range(nv):
+            if c.order[(fa * nv + d) * nv + d] == 0.0 and (
+                    fb < 0 or c.order[(fb * nv + d) * nv + d] == 0.0):
+                for i in range(naxes):
+                    Jc[(row + i) * nv + d] = 0.0
+                continue
+            Sj = S + (fa * nv + d) * 6
+            for h in range(6):
+                x0[h] = Sj[h]
+            if not frame6:  # the points' velocities
+                add_cross(Sj + 3, &P[3 * fa], 1.0, x0)
+                if fb >= 0:
+                    Sj = S + (fb * nv + d) * 6
+                    for h in range(3):
+                        x0[h] -= Sj[h]
+                    add_cross(Sj + 3, &P[3 * fb], -1.0, x0)
+            else:  # the twists' difference at A's origin
+                if fb >= 0:
+                    Sj = S + (fb * nv + d) * 6
+                    for h in range(6):
+                        x0[h] -= Sj[h]
+                add_cross(x0 + 3, &P[3 * fa], 1.0, x0)
+            if local:
+                _turn(R + 9 * fa, x0, 2 if frame6 else 1)
+            for i in range(naxes):
+                Jc[(row + i) * nv + d] = x0[tb[5 + i]]
+        row += naxes
+
+
+cdef inline void _turn(const double *R, double *x, int blocks) noexcept nogil:
+    """x ← Rᵀ x for each of its first `blocks` 3-vectors."""
+    cdef double t[3]
+    cdef int h, i
+    for h in range(blocks):
+        for i in range(3):
+            t[i] = R[i] * x[3 * h] + R[3 + i] * x[3 * h + 1] + R[6 + i] * x[3 * h + 2]
+        for i in range(3):
+            x[3 * h + i] = t[i]
+
+
+cdef void _terms(const Ctx *c, const double *J, const double *R, double *P, double *S,
+                 double *Vb, double *Sd, double *dVq, double *dAq, double *dAv, double *dW,
+                 double *V, double *A, double *W, double *T, const double *v, const double *a,
+                 const double *lam, double kd, double *r2, double *dJtl) noexcept nogil:
+    """r2 = [−∂a_c/∂q | −∂a_c/∂q̇ | 0] (m, 3 nv) and dJtl += ∂(Jᵀ λ)/∂q (nv, nv), λ held
+    (the module docstring of gagen.runtime.constraint_derivatives has the sums)."""
+    cdef Py_ssize_t nv = c.nv, nf = c.nf, n3 = 3 * c.nv, m = c.m
+    cdef Py_ssize_t f, i, j, k, cc, d, h, n, jj, kk
+    cdef const double *order
+    cdef const int *ch
+    cdef double u[6]
+    cdef double *e1
+    cdef double e0[6]
+    cdef double e2[6]
+    cdef double tmp[6]
+    memset(r2, 0, m * n3 * sizeof(double))
+    # --- each frame's A and the derivatives of V and A along its chain (root first; a
+    # floating joint's six coordinates are one group, each on or above the others). With
+    # the chain's sums V_j = Σ_{i ⪯ j} S_i q̇_i (j's body, _motion's), Vp_k (k's joint's
+    # parent body), Vv_k = Σ_{j ⪰ k} S_j q̇_j and Aa_k = Σ_{j ⪰ k} S_j a_j + Ṡ_j q̇_j, the
+    # module docstring's sums close by the Jacobi identity into ∂V/∂q_k = S_k × Vv_k and
+    # ∂A/∂q_k = S_k × Aa_k − (S_k × Vp_k) × Vv_k: O(chain) per frame.
+    cdef double *pre = T               # (n + 1, 6) prefix sums of S_j q̇_j
+    cdef double *sv = T + 6 * (nv + 1)  # (n + 1, 6) suffix sums of S_j q̇_j
+    cdef double *sa = sv + 6 * (nv + 1)  # (n + 1, 6) suffix sums of S_j a_j + Ṡ_j q̇_j
+    cdef const int *start
+    cdef double *Sj
+    for f in range(nf):
+        ch = c.chain + f * nv
+        n = c.chain_len[f]
+        start = c.group_start + f * nv
         for h in range(6):
+            pre[h] = 0.0
             sv[6 * n + h] = 0.0
             sa[6 * n + h] = 0.0
+        for jj in range(n):
+            Sj = S + (f * nv + ch[jj]) * 6
+            for h in range(6):
+                pre[6 * (jj + 1) + h] = pre[6 * jj + h] + Sj[h] * v[ch[jj]]
         for jj in range(n - 1, -1, -1):
             j = ch[jj]
             Sj = S + (f * nv + j) * 6
@@ -832,7 +901,6 @@ cdef void _terms(const Ctx *c, const double *J, const double *R, double *P, doub
                 sa[6 * jj + h] = sa[6 * (jj + 1) + h] + Sj[h] * a[j] \
                     + Sd[(f * nv + j) * 6 + h] * v[j]
         for h in range(6):
-            V[6 * f + h] = pre[6 * n + h]
             A[6 * f + h] = sa[h]
         for kk in range(n):
             k = ch[kk]
