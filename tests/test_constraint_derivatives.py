@@ -229,9 +229,9 @@ def test_bad_arguments_are_refused_with_one_line(backend, cache_dir):
 
 
 def test_the_c_of_one_state_matches_the_numpy_path(anymal, monkeypatch):
-    """One state goes through runtime/_constraint_terms.pyx, stacked states (and a build
-    without it) through NumPy: the two agree on random sets of every kind of constraint,
-    with kd and damping."""
+    """A compiled model's call goes through runtime/_constraint_terms.pyx, a build without
+    it (and the lambdify backend) through NumPy: the two agree on random sets of every kind
+    of constraint, with kd and damping."""
     from gagen.runtime import constraint_derivatives
 
     assert constraint_derivatives._terms is not None, "the runtime's C was not built"

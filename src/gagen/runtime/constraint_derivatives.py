@@ -1,6 +1,7 @@
-"""The derivatives of the constrained forward dynamics, on either backend's kernels: at one
-state through the C of _constraint_terms.pyx, stacked states (and a tree without that build)
-in the NumPy below, which is its reference.
+"""The derivatives of the constrained forward dynamics, on either backend's kernels: a
+compiled model's one or stacked states in one call into the C of _constraint_terms.pyx;
+the lambdify backend (and a source tree without that build, and a state the C refuses) in
+the NumPy below, which is its reference.
 
 At the solution (q̈, λ) of constrained_forward_dynamics (gagen.runtime.constraints),
 
