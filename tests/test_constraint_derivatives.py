@@ -301,10 +301,11 @@ def test_stacked_states_go_through_the_c_and_equal_single_ones(anymal, monkeypat
         close(stacked[i], numpy[i], f"stacked {name}: C against NumPy", rtol=1e-11)
 
 
-def test_the_defaults_call_equals_the_checked_one(cache_dir, monkeypatch):
-    """Every constraint active, no gains, no damping: the call goes straight into the C;
-    its results are those of the same set named explicitly, for arrays and lists alike, in
-    fresh arrays; a bad state still gets the checked path's one-line error."""
+def test_the_direct_call_equals_the_checked_one(cache_dir, monkeypatch):
+    """Options that need no conversion (None or bools for active, a tuple of numbers for
+    baumgarte): the call goes straight into the C; its results are those of the checked
+    path (a mask array), for arrays and lists alike, in fresh arrays; a bad state still
+    gets the checked path's one-line error."""
     from gagen.runtime import constraint_derivatives
 
     dyn = fourbar("compiled", cache_dir)
@@ -315,7 +316,16 @@ def test_the_defaults_call_equals_the_checked_one(cache_dir, monkeypatch):
         patch.setattr(constraint_derivatives, "_terms", counting)
         fast = dyn.constrained_forward_dynamics_derivatives(q, v, tau)
         assert counting.calls == [q.shape]
-    checked = dyn.constrained_forward_dynamics_derivatives(q, v, tau, [True], (0.0, 0.0), 0.0)
+    checked = dyn.constrained_forward_dynamics_derivatives(q, v, tau, np.array([True]),
+                                                           (0.0, 0.0), 0.0)
+    with monkeypatch.context() as patch:
+        patch.setattr(constraint_derivatives, "_terms", counting)
+        direct = dyn.constrained_forward_dynamics_derivatives(q, v, tau, [True], (0, 1.5), 0.1)
+        assert counting.calls == [q.shape] * 2
+    kept = dyn.constrained_forward_dynamics_derivatives(q, v, tau, np.array([True]), (0, 1.5),
+                                                        0.1)
+    for name, x, y in zip(NAMES, direct, kept):
+        np.testing.assert_array_equal(x, y, name)
     lists = dyn.constrained_forward_dynamics_derivatives(q.tolist(), list(v), list(tau))
     again = dyn.constrained_forward_dynamics_derivatives(q, v, tau)
     for name, x, y, z, w in zip(NAMES, fast, checked, lists, again):

@@ -7,7 +7,7 @@ from functools import partial
 
 from ..errors import BuildError
 from ..manifest import ModelInfo
-from .constraint_derivatives import compiled_defaults
+from .constraint_derivatives import compiled_call
 from .constraints import Arguments
 from .dynamics import Dynamics
 from .frames import frame_index
@@ -113,8 +113,8 @@ class CompiledDynamics(Dynamics):
 
     def constrained_forward_dynamics_derivatives(self, q, qd, tau, active=None,
                                                  baumgarte=(0.0, 0.0), damping=0.0, p=None):
-        # the defaults' call goes straight into the C (constraint_derivatives)
-        found = compiled_defaults(self, q, qd, tau, active, baumgarte, damping, p)
+        # a call whose options need no conversion goes straight into the C
+        found = compiled_call(self, q, qd, tau, active, baumgarte, damping, p)
         if found is not None:
             return found
         return Dynamics.constrained_forward_dynamics_derivatives(self, q, qd, tau, active,

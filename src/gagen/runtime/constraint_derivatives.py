@@ -35,6 +35,8 @@ conventions (tests/test_constraint_derivatives.py).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .constraints import active_rows
@@ -281,18 +283,34 @@ def derivatives(dyn, q, qd, tau, p, mask, kd: float, damping: float):
             dforces[..., :nv], dforces[..., nv: 2 * nv], dforces[..., 2 * nv:])
 
 
-def compiled_defaults(dyn, q, qd, tau, active, baumgarte, damping, p):
-    """A compiled model's call with every constraint active, no Baumgarte gains, no damping
-    and the default parameters, straight into the C (its arguments need no checks); None
-    for any other call or where the C refuses (the caller then takes the checked path)."""
-    if active is not None or p is not None or _terms is None or damping != 0.0 \
-            or type(baumgarte) is not tuple or baumgarte != (0.0, 0.0):
+def compiled_call(dyn, q, qd, tau, active, baumgarte, damping, p):
+    """A compiled model's call whose options need no conversion, straight into the C:
+    `active` None or a list or tuple of one bool per constraint, `baumgarte` a tuple
+    (0, kd) of finite numbers >= 0, `damping` a finite number >= 0, the default parameters.
+    None for any other call, or where the C refuses an input or a state: the caller then
+    takes the checked path (which converts, or raises its one-line error)."""
+    if p is not None or _terms is None or type(baumgarte) is not tuple or len(baumgarte) != 2:
         return None
-    plan = dyn.__dict__.get("_constraint_derivative_plan_all")
+    kp, kd = baumgarte
+    if type(kp) not in _NUMBERS or type(kd) not in _NUMBERS or type(damping) not in _NUMBERS \
+            or kp != 0 or not 0 <= kd < math.inf or not 0 <= damping < math.inf:
+        return None
+    if active is not None:
+        if type(active) not in (list, tuple) or len(active) != len(dyn.info.constraints) \
+                or any(type(x) is not bool for x in active):
+            return None
+        active = tuple(active)
+    plans = dyn.__dict__.setdefault("_constraint_derivative_calls", {})
+    plan = plans.get(active)
     if plan is None:
-        plan = dyn.__dict__["_constraint_derivative_plan_all"] = _plan(
-            dyn, np.ones(len(dyn.info.constraints), dtype=bool))
-    return _terms.derivatives(plan, q, qd, tau, None, 0.0, 0.0)
+        on = [True] * len(dyn.info.constraints) if active is None else active
+        plan = _plan(dyn, np.array(on, dtype=bool))
+        if len(plans) < 256:
+            plans[active] = plan
+    return _terms.derivatives(plan, q, qd, tau, None, float(kd), float(damping))
+
+
+_NUMBERS = (float, int)
 
 
 def _compiled(dyn, q, qd, tau, p, mask, kd, damping):
