@@ -342,6 +342,25 @@ def test_the_direct_call_equals_the_checked_one(cache_dir, monkeypatch):
         tree.constrained_forward_dynamics_derivatives(q, v, tau)
 
 
+def test_parameters_reach_the_c(cache_dir, monkeypatch):
+    """Parameters other than the defaults (the four-bar's link lengths, which move its loop's
+    frames, and a mass) give the C the NumPy reference's numbers, not the defaults'."""
+    from gagen.runtime import constraint_derivatives
+
+    dyn = fourbar("compiled", cache_dir)
+    rng = np.random.default_rng(30)
+    q, v, tau = closed_fourbar(0.4), rng.normal(size=3), rng.normal(size=3)
+    p = {"b": 1.05, "c": 0.85, "m2": 2.5}
+    ours = dyn.constrained_forward_dynamics_derivatives(q, v, tau, p=p)
+    with monkeypatch.context() as patch:
+        patch.setattr(constraint_derivatives, "_terms", None)
+        numpy = dyn.constrained_forward_dynamics_derivatives(q, v, tau, p=p)
+    default = dyn.constrained_forward_dynamics_derivatives(q, v, tau)
+    for name, x, y in zip(NAMES, ours, numpy):
+        close(x, y, f"{name} with parameters: C against NumPy", rtol=1e-11)
+    assert any(np.abs(x - z).max() > 1e-6 * np.abs(z).max() for x, z in zip(ours, default))
+
+
 def test_dependent_rows_are_refused_as_the_dynamics_refuse_them(anymal):
     """The C's Delassus factor tests its pivots as the model's constrained dynamics do: a
     foot held twice is the same one-line error, and with damping a damped answer."""

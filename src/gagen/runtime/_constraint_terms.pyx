@@ -196,6 +196,7 @@ cdef class Plan:
     cdef Ctx c
     cdef object _keep
     cdef readonly int nq, nv, nrows
+    cdef double[::1] _offsets  # the frames' offsets at the default parameters
 
     def __init__(self, model_capsule, derivative_capsule, int[::1] frames, int[::1] bodies,
                  int[:, ::1] table, int[::1] parent, int[::1] rows, int[::1] quat,
@@ -235,14 +236,16 @@ cdef class Plan:
             raise ValueError("the descendants' sizes are not the model's")
         self.c.desc_ptr = &desc_ptr[0]
         self.c.desc = &desc[0] if desc.shape[0] else NULL
+        self._offsets = np.zeros(12 * api.nf + 1)
+        api.frame_offsets(api.parameter_defaults, &self._offsets[0])
 
 
 cdef inline Py_ssize_t _workspace_size(const Ctx *c) noexcept nogil:
     """Doubles of one state's workspace (_state's layout)."""
     cdef Py_ssize_t n = c.nv, f = c.nf, m = c.m
     return (n + (c.nrows if c.nrows > n else n) + m + 3 * n * n + 15 * c.nb + f * 6 * n
-            + m * n + 12 * f + 7 * f * n * 6 + 12 * f + n * n * 6 + 18 * (n + 1) + m * 3 * n + n * n
-            + (n + m) * 3 * n + m * n + m * m + n + n + m)
+            + m * n + 12 * f + 7 * f * n * 6 + 12 * f + n * n * 6 + 18 * (n + 1)
+            + m * 3 * n + n * n + (n + m) * 3 * n + m * n + m * m + n + n + m)
 
 
 def derivatives(Plan plan, q, qd, tau, p, double kd, double damping):
@@ -298,9 +301,12 @@ def derivatives(Plan plan, q, qd, tau, p, double kd, double damping):
         free(ws)
         free(ints)
         raise MemoryError()
-    cdef double *Fo = ws + _workspace_size(c)
+    cdef double *Fo = &plan._offsets[0]
+    cdef bint given = p is not None
     with nogil:
-        c.api.frame_offsets(pp, Fo)
+        if given:
+            Fo = ws + _workspace_size(c)
+            c.api.frame_offsets(pp, Fo)
         for i in range(count):
             status = _state(c, qa + i * nq, qb + i * n, qt + i * n, pp, Fo, kd, damping,
                             ws, ints, o[0] + i * n * n, o[1] + i * n * n, o[2] + i * n * n,
