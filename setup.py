@@ -25,11 +25,11 @@ def runtime_extension() -> Extension:
 
 
 def constraint_terms_extension() -> Extension:
-    """The constrained dynamics' derivatives at one state (gagen.runtime.constraint_derivatives
-    calls it; without it, the same in NumPy)."""
+    """The constrained dynamics' derivatives in C (gagen.runtime.constraint_derivatives calls
+    it; without it, the same in NumPy); it calls the models' kernels through gagen_api.h."""
     return Extension("gagen.runtime._constraint_terms",
                      [relative(HERE / "src/gagen/runtime/_constraint_terms.pyx")],
-                     include_dirs=[numpy.get_include()],
+                     include_dirs=[relative(TEMPLATES_C), numpy.get_include()],
                      define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
                      extra_compile_args=["-O3"])
 

@@ -229,9 +229,9 @@ def test_bad_arguments_are_refused_with_one_line(backend, cache_dir):
 
 
 def test_the_c_of_one_state_matches_the_numpy_path(anymal, monkeypatch):
-    """One state goes through runtime/_constraint_terms.pyx, stacked states (and a build
-    without it) through NumPy: the two agree on random sets of every kind of constraint,
-    with kd and damping."""
+    """A compiled model's call goes through runtime/_constraint_terms.pyx, a build without
+    it (and the lambdify backend) through NumPy: the two agree on random sets of every kind
+    of constraint, with kd and damping."""
     from gagen.runtime import constraint_derivatives
 
     assert constraint_derivatives._terms is not None, "the runtime's C was not built"
@@ -256,6 +256,122 @@ def test_the_c_of_one_state_matches_the_numpy_path(anymal, monkeypatch):
         for name, x, y in zip(NAMES, ours, numpy):
             close(x, y, f"{name} of {chosen} {options}: C against NumPy")
         checked += 1
+
+
+class _Counting:
+    """_constraint_terms with its derivatives() calls counted (its other names as they are)."""
+
+    def __init__(self, module):
+        self.module, self.calls = module, []
+
+    def __getattr__(self, name):
+        return getattr(self.module, name)
+
+    def derivatives(self, plan, q, *args):
+        self.calls.append(np.shape(q))
+        return self.module.derivatives(plan, q, *args)
+
+
+def test_stacked_states_go_through_the_c_and_equal_single_ones(anymal, monkeypatch):
+    """Stacked states are one call into the C (a loop over the states there): each state's
+    result is the single call's, bit for bit, and the NumPy reference's."""
+    from gagen.runtime import constraint_derivatives
+
+    rng = np.random.default_rng(27)
+    chosen = ("LF6", "RH_local", "loop3")
+    on = mask(anymal, *chosen)
+    states = [conditioned_state(anymal, chosen, rng, limit=1e4) for _ in range(4)]
+    Q, V, T = (np.stack([s[k] for s in states]) for k in range(3))
+    options = {"baumgarte": (0.0, 2.0), "damping": 0.05}
+    counting = _Counting(constraint_derivatives._terms)
+    with monkeypatch.context() as patch:
+        patch.setattr(constraint_derivatives, "_terms", counting)
+        stacked = anymal.constrained_forward_dynamics_derivatives(Q, V, T, on, **options)
+        assert counting.calls == [Q.shape], "stacked states did not take one call into C"
+        singles = [anymal.constrained_forward_dynamics_derivatives(Q[k], V[k], T[k], on,
+                                                                   **options)
+                   for k in range(len(Q))]
+    with monkeypatch.context() as patch:
+        patch.setattr(constraint_derivatives, "_terms", None)
+        numpy = anymal.constrained_forward_dynamics_derivatives(Q, V, T, on, **options)
+    for i, name in enumerate(NAMES):
+        assert stacked[i].shape == (len(Q),) + singles[0][i].shape
+        for k in range(len(Q)):
+            np.testing.assert_array_equal(stacked[i][k], singles[k][i], f"{name} state {k}")
+        close(stacked[i], numpy[i], f"stacked {name}: C against NumPy", rtol=1e-11)
+
+
+def test_the_direct_call_equals_the_checked_one(cache_dir, monkeypatch):
+    """Options that need no conversion (None or bools for active, a tuple of numbers for
+    baumgarte): the call goes straight into the C; its results are those of the checked
+    path (a mask array), for arrays and lists alike, in fresh arrays; a bad state still
+    gets the checked path's one-line error."""
+    from gagen.runtime import constraint_derivatives
+
+    dyn = fourbar("compiled", cache_dir)
+    rng = np.random.default_rng(28)
+    q, v, tau = closed_fourbar(0.7), rng.normal(size=3), rng.normal(size=3)
+    counting = _Counting(constraint_derivatives._terms)
+    with monkeypatch.context() as patch:
+        patch.setattr(constraint_derivatives, "_terms", counting)
+        fast = dyn.constrained_forward_dynamics_derivatives(q, v, tau)
+        assert counting.calls == [q.shape]
+    checked = dyn.constrained_forward_dynamics_derivatives(q, v, tau, np.array([True]),
+                                                           (0.0, 0.0), 0.0)
+    with monkeypatch.context() as patch:
+        patch.setattr(constraint_derivatives, "_terms", counting)
+        direct = dyn.constrained_forward_dynamics_derivatives(q, v, tau, [True], (0, 1.5), 0.1)
+        assert counting.calls == [q.shape] * 2
+    kept = dyn.constrained_forward_dynamics_derivatives(q, v, tau, np.array([True]), (0, 1.5),
+                                                        0.1)
+    for name, x, y in zip(NAMES, direct, kept):
+        np.testing.assert_array_equal(x, y, name)
+    lists = dyn.constrained_forward_dynamics_derivatives(q.tolist(), list(v), list(tau))
+    again = dyn.constrained_forward_dynamics_derivatives(q, v, tau)
+    for name, x, y, z, w in zip(NAMES, fast, checked, lists, again):
+        np.testing.assert_array_equal(x, y, name)
+        np.testing.assert_array_equal(x, z, name)
+        assert not np.shares_memory(x, w)
+    with pytest.raises(ValueError, match="tau must have shape"):
+        dyn.constrained_forward_dynamics_derivatives(q, v, tau[:-1])
+    tree = load_tree(2, "compiled", cache_dir)
+    q, v, tau = random_state(tree, rng)
+    (iq, _), = tree.info.floating_joints()
+    q[iq + 3: iq + 7] = 0.0
+    with pytest.raises(ValueError, match="cannot be normalised in double precision"):
+        tree.constrained_forward_dynamics_derivatives(q, v, tau)
+
+
+def test_parameters_reach_the_c(cache_dir, monkeypatch):
+    """Parameters other than the defaults (the four-bar's link lengths, which move its loop's
+    frames, and a mass) give the C the NumPy reference's numbers, not the defaults'."""
+    from gagen.runtime import constraint_derivatives
+
+    dyn = fourbar("compiled", cache_dir)
+    rng = np.random.default_rng(30)
+    q, v, tau = closed_fourbar(0.4), rng.normal(size=3), rng.normal(size=3)
+    p = {"b": 1.05, "c": 0.85, "m2": 2.5}
+    ours = dyn.constrained_forward_dynamics_derivatives(q, v, tau, p=p)
+    with monkeypatch.context() as patch:
+        patch.setattr(constraint_derivatives, "_terms", None)
+        numpy = dyn.constrained_forward_dynamics_derivatives(q, v, tau, p=p)
+    default = dyn.constrained_forward_dynamics_derivatives(q, v, tau)
+    for name, x, y in zip(NAMES, ours, numpy):
+        close(x, y, f"{name} with parameters: C against NumPy", rtol=1e-11)
+    assert any(np.abs(x - z).max() > 1e-6 * np.abs(z).max() for x, z in zip(ours, default))
+
+
+def test_dependent_rows_are_refused_as_the_dynamics_refuse_them(anymal):
+    """The C's Delassus factor tests its pivots as the model's constrained dynamics do: a
+    foot held twice is the same one-line error, and with damping a damped answer."""
+    q, v, tau = standing(anymal, np.random.default_rng(29))
+    twice = mask(anymal, "LF", "LF_local", "RH")
+    with pytest.raises(gagen.SingularConstraintError, match="linearly dependent"):
+        anymal.constrained_forward_dynamics(q, v, tau, twice)
+    with pytest.raises(gagen.SingularConstraintError, match="linearly dependent"):
+        anymal.constrained_forward_dynamics_derivatives(q, v, tau, twice)
+    damped = anymal.constrained_forward_dynamics_derivatives(q, v, tau, twice, damping=0.1)
+    assert all(np.isfinite(x).all() for x in damped)
 
 
 @pytest.mark.parametrize("backend", ["lambdify", "compiled"])

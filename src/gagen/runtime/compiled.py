@@ -7,6 +7,7 @@ from functools import partial
 
 from ..errors import BuildError
 from ..manifest import ModelInfo
+from .constraint_derivatives import compiled_call
 from .constraints import Arguments
 from .dynamics import Dynamics
 from .frames import frame_index
@@ -110,6 +111,17 @@ class CompiledDynamics(Dynamics):
     def constraint_error(self, q, active=None, p=None):
         return self.kernels.constraint_rows(2, q, None, active, p)
 
+    def constrained_forward_dynamics_derivatives(self, q, qd, tau, active=None,
+                                                 baumgarte=(0.0, 0.0), damping=0.0, p=None):
+        # a call whose options need no conversion goes straight into the C
+        found = compiled_call(self, q, qd, tau, active, baumgarte, damping, p)
+        if found is not None:
+            return found
+        return Dynamics.constrained_forward_dynamics_derivatives(self, q, qd, tau, active,
+                                                                 baumgarte, damping, p)
+
+    constrained_forward_dynamics_derivatives.__doc__ = \
+        Dynamics.constrained_forward_dynamics_derivatives.__doc__
     constraint_jacobian.__doc__ = Dynamics.constraint_jacobian.__doc__
     constraint_drift.__doc__ = Dynamics.constraint_drift.__doc__
     constraint_error.__doc__ = Dynamics.constraint_error.__doc__

@@ -1,6 +1,7 @@
-"""The derivatives of the constrained forward dynamics, on either backend's kernels: at one
-state through the C of _constraint_terms.pyx, stacked states (and a tree without that build)
-in the NumPy below, which is its reference.
+"""The derivatives of the constrained forward dynamics, on either backend's kernels: a
+compiled model's one or stacked states in one call into the C of _constraint_terms.pyx;
+the lambdify backend (and a source tree without that build, and a state the C refuses) in
+the NumPy below, which is its reference.
 
 At the solution (q̈, λ) of constrained_forward_dynamics (gagen.runtime.constraints),
 
@@ -33,6 +34,8 @@ conventions (tests/test_constraint_derivatives.py).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -240,20 +243,22 @@ def _on_chains(fm: FrameMotions, W0, Wq):
 def derivatives(dyn, q, qd, tau, p, mask, kd: float, damping: float):
     """(∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂τ, ∂λ/∂q, ∂λ/∂q̇, ∂λ/∂τ) at the constrained forward dynamics'
     solution (module docstring), λ over every declared row (zero rows for the inactive
-    constraints); stacked states give stacked outputs."""
+    constraints); stacked states give stacked outputs. A compiled model's call is one call
+    into _constraint_terms's C (one state or a C loop over stacked ones); the NumPy below
+    serves the lambdify backend and any state the C refuses (it raises or answers)."""
+    if _terms is not None and dyn.backend == "compiled":
+        found = _compiled(dyn, q, qd, tau, p, mask, kd, damping)
+        if found is not None:
+            return found
     from .inputs import as_states
     from .taskspace import _mass_cholesky
 
     info, nv = dyn.info, dyn.nv
-    (q, qd, tau), stacked = as_states(dyn._sizes, q, qd, tau, names=("q", "qd", "tau"))
+    (q, qd, tau), _ = as_states(dyn._sizes, q, qd, tau, names=("q", "qd", "tau"))
     on = tuple(bool(x) for x in mask)  # the compiled runtime keeps a tuple's checks
     qdd, forces = dyn.constrained_forward_dynamics(q, qd, tau, active=on,
                                                    baumgarte=(0.0, kd), damping=damping, p=p)
     dID_dq, dID_dv = dyn.inverse_dynamics_derivatives(q, qd, qdd, p)
-    if not stacked and _terms is not None:
-        found = _compiled(dyn, q, qd, qdd, p, mask, forces, kd, damping, dID_dq, dID_dv)
-        if found is not None:
-            return found
     L = _mass_cholesky(dyn.mass_matrix(q, p))
     lead, rows = q.shape[:-1], active_rows(info, mask)
     m = len(rows)
@@ -278,43 +283,117 @@ def derivatives(dyn, q, qd, tau, p, mask, kd: float, damping: float):
             dforces[..., :nv], dforces[..., nv: 2 * nv], dforces[..., 2 * nv:])
 
 
-def _compiled(dyn, q, qd, qdd, p, mask, forces, kd, damping, dID_dq, dID_dv):
-    """The six derivatives at one state by _constraint_terms's C (None where a factor's
-    pivot is not positive: the NumPy path then raises or answers)."""
-    info, nv = dyn.info, dyn.nv
-    names, table, order, rows, bodies, frames, active = _layout(dyn, mask)
-    m = len(rows)
-    out = np.empty((nv + m, 3 * nv))
-    if names:
-        X, F = dyn._placements(q, p), dyn._frame_offsets(p)
-        J = np.ascontiguousarray(dyn.frame_jacobian(q, names, p=p))
-        Jc = np.ascontiguousarray(dyn.constraint_jacobian(q, active, p))
-    else:
-        X, F = np.zeros(0), np.zeros(0)
-        J, Jc = np.zeros((0, 6, nv)), np.zeros((0, nv))
-    lam = np.ascontiguousarray(forces[rows])
-    status = _terms.derivatives_one(J, np.ascontiguousarray(X, dtype=float),
-                                    np.ascontiguousarray(F, dtype=float), bodies, frames,
-                                    order, qd, qdd, table, lam, float(kd),
-                                    np.ascontiguousarray(dyn.mass_matrix(q, p)), Jc,
-                                    np.ascontiguousarray(dID_dq), np.ascontiguousarray(dID_dv),
-                                    float(damping), out)
-    if status:
+def compiled_call(dyn, q, qd, tau, active, baumgarte, damping, p):
+    """A compiled model's call whose options need no conversion, straight into the C:
+    `active` None or a list or tuple of one bool per constraint, `baumgarte` a tuple
+    (0, kd) of finite numbers >= 0, `damping` a finite number >= 0, the default parameters.
+    None for any other call, or where the C refuses an input or a state: the caller then
+    takes the checked path (which converts, or raises its one-line error)."""
+    if p is not None or _terms is None or type(baumgarte) is not tuple or len(baumgarte) != 2:
         return None
-    dforces = np.zeros((info.constraint_rows, 3 * nv))
-    dforces[rows] = out[nv:]
-    return (out[:nv, :nv].copy(), out[:nv, nv: 2 * nv].copy(), out[:nv, 2 * nv:].copy(),
-            dforces[:, :nv].copy(), dforces[:, nv: 2 * nv].copy(), dforces[:, 2 * nv:].copy())
+    kp, kd = baumgarte
+    if type(kp) not in _NUMBERS or type(kd) not in _NUMBERS or type(damping) not in _NUMBERS \
+            or kp != 0 or not 0 <= kd < math.inf or not 0 <= damping < math.inf:
+        return None
+    if active is not None:
+        if type(active) not in (list, tuple) or len(active) != len(dyn.info.constraints) \
+                or any(type(x) is not bool for x in active):
+            return None
+        active = tuple(active)
+    plans = dyn.__dict__.setdefault("_constraint_derivative_calls", {})
+    plan = plans.get(active)
+    if plan is None:
+        on = [True] * len(dyn.info.constraints) if active is None else active
+        plan = _plan(dyn, np.array(on, dtype=bool))
+        if len(plans) < 256:
+            plans[active] = plan
+    return _terms.derivatives(plan, q, qd, tau, None, float(kd), float(damping))
 
 
-def _layout(dyn, mask):
-    """(frame names, the C's constraint table, the chains' order (f, nv, nv), the active
-    rows) of an active set, kept per model and set."""
-    kept = dyn.__dict__.setdefault("_constraint_derivative_layouts", {})
+_NUMBERS = (float, int)
+
+
+def _compiled(dyn, q, qd, tau, p, mask, kd, damping):
+    """The six derivatives by _constraint_terms's C, at one state or stacked ones (None
+    where it refuses an input or a state: the NumPy path then raises or answers)."""
+    plan = _plan(dyn, mask)
+    if p is not None:
+        p = np.ascontiguousarray(dyn.parameter_vector(p), dtype=float)
+        if not np.isfinite(p).all():
+            return None
+    found = _terms.derivatives(plan, q, qd, tau, p, kd, damping)
+    if found is not None:
+        return found
+    from .inputs import as_states  # lists, other dtypes, strides: converted, or the error
+
+    (q, qd, tau), _ = as_states(dyn._sizes, q, qd, tau, names=("q", "qd", "tau"))
+    return _terms.derivatives(plan, np.ascontiguousarray(q, dtype=float),
+                              np.ascontiguousarray(qd, dtype=float),
+                              np.ascontiguousarray(tau, dtype=float), p, kd, damping)
+
+
+def _plan(dyn, mask):
+    """_constraint_terms's Plan of a compiled model and an active set, kept per model and
+    set."""
+    kept = dyn.__dict__.setdefault("_constraint_derivative_plans", {})
     key = mask.tobytes()
     found = kept.get(key)
     if found is not None:
         return found
+    dyn.load_derivatives()
+    info, nv = dyn.info, dyn.nv
+    names, table, order, rows, bodies, frames, _ = _layout(dyn, mask)
+    chain = np.zeros((len(names), nv), dtype=np.int32)
+    chain_len = np.zeros(len(names), dtype=np.int32)
+    start, end = np.zeros_like(chain), np.zeros_like(chain)
+    for f in range(len(names)):
+        on = np.flatnonzero(np.diagonal(order[f]))
+        chain[f, :len(on)] = on  # coordinates in q's order: a root's before its subtree's
+        chain_len[f] = len(on)
+        for i in range(len(on)):  # a joint's coordinates are each other's (a floating one)
+            joined = i > 0 and order[f, on[i], on[i - 1]] != 0
+            start[f, i] = start[f, i - 1] if joined else i
+        for i in range(len(on) - 1, -1, -1):
+            joined = i + 1 < len(on) and start[f, i + 1] == start[f, i]
+            end[f, i] = end[f, i + 1] if joined else i + 1
+    quat = np.array([offset for offset, _ in info.quaternions()], dtype=np.int32)
+    parents = dof_parents(info.bodies, nv)
+    below: list[list[int]] = [[] for _ in range(nv)]  # each coordinate's descendants
+    for k in range(nv):
+        i = parents[k]
+        while i >= 0:
+            below[i].append(k)
+            i = parents[i]
+    desc_ptr = np.cumsum([0] + [len(b) for b in below]).astype(np.int32)
+    desc = np.array([k for b in below for k in b] or [0], dtype=np.int32)
+    found = _terms.Plan(dyn.module.API, dyn.derivative_module.API, frames, bodies, table,
+                        np.array(parents, dtype=np.int32),
+                        np.asarray(rows, dtype=np.int32), quat, chain, chain_len, start, end,
+                        np.ascontiguousarray(order, dtype=float),
+                        np.ascontiguousarray(mask, dtype=np.uint8), desc_ptr, desc)
+    if len(kept) < 256:
+        kept[key] = found
+    return found
+
+
+def dof_parents(bodies, n: int) -> list[int]:
+    """Per velocity coordinate, the one before it on its path to the world (-1: none):
+    Featherstone's λ, the sparsity of M's factors M = Lᵀ D L (codegen.render's dof_parents,
+    which the runtime does not import)."""
+    last: list[int] = []  # per body, the last coordinate on its path (-1: none)
+    out = [-1] * n
+    for parent, kind, column in bodies:
+        before = last[parent] if parent >= 0 else -1
+        size = 6 if kind == FLOATING else (1 if kind else 0)
+        for k in range(size):
+            out[column + k] = before if k == 0 else column + k - 1
+        last.append(column + size - 1 if size else before)
+    return out
+
+
+def _layout(dyn, mask):
+    """(frame names, the C's constraint table, the chains' order (f, nv, nv), the active
+    rows, the frames' bodies and numbers, the mask as a tuple) of an active set."""
     info, nv = dyn.info, dyn.nv
     active = [c for c, on in zip(info.constraints, mask) if on]
     names = list(dict.fromkeys(f for c in active for f in c.frames[:2 if c.type == "loop"
@@ -329,11 +408,8 @@ def _layout(dyn, mask):
                       for name in names]) if names else np.zeros((0, nv, nv))
     frames = np.array([info.frame_indices[name] for name in names], dtype=np.int32)
     bodies = np.array([info.frames[k][1] for k in frames], dtype=np.int32)
-    found = (names, table, np.ascontiguousarray(order), active_rows(info, mask), bodies,
-             frames, tuple(bool(x) for x in mask))
-    if len(kept) < 256:
-        kept[key] = found
-    return found
+    return (names, table, np.ascontiguousarray(order), active_rows(info, mask), bodies,
+            frames, tuple(bool(x) for x in mask))
 
 
 def _constraint_terms(dyn, q, qd, qdd, p, mask, lam, kd: float, r2: list):
