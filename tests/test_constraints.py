@@ -924,3 +924,27 @@ def test_the_constraints_a_model_holds_are_bounded(count, axes, message):
     with pytest.raises(gagen.ModelError, match=message) as info:
         gagen.load(URDF / "double_pendulum.urdf", backend="lambdify", constraints=entries)
     assert "\n" not in str(info.value)
+
+
+def test_the_written_and_the_table_driven_solves_agree(cache_dir, tmp_path, monkeypatch):
+    """Up to a size, a model's C writes out each constraint's rows of J L^-1 and each block
+    of the Delassus matrix with their coordinates as constants; past it, loops read the same
+    runs from tables. Both give the same constrained dynamics (the four-bar built both ways,
+    the table-driven one into a cache of its own)."""
+    from gagen.codegen import render
+
+    written = fourbar("compiled", cache_dir)
+    monkeypatch.setattr(render, "CONSTRAINT_UNROLLED", 0)
+    monkeypatch.setattr(render, "CONSTRAINT_BLOCKS_WRITTEN", 0)
+    tables = gagen.load(FOURBAR, cache_dir=tmp_path / "tables")
+    sources = {name: (Path(dyn.module.__file__).parent / "frames.c").read_text()
+               for name, dyn in (("written", written), ("tables", tables))}
+    assert "gagen_cn_block_written" in sources["written"]
+    assert "gagen_cn_block_written" not in sources["tables"]
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        q = closed_fourbar(rng.uniform(-np.pi, np.pi))
+        v, tau = rng.normal(size=written.nv), rng.normal(size=written.nv)
+        for ours, theirs in zip(written.constrained_forward_dynamics(q, v, tau, damping=1e-3),
+                                tables.constrained_forward_dynamics(q, v, tau, damping=1e-3)):
+            close(ours, theirs, "written vs tables", rtol=1e-12)

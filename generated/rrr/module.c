@@ -94,7 +94,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "8113b22ae488ae610525362d8f5aa611f25bb0bfd4c29fed4e768b0538414b10") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "04344fd50bb546fc617368c77729b79989e9d9a7e1b4daa075b5035a38063b74") < 0) {
         Py_DECREF(module);
         return NULL;
     }

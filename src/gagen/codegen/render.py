@@ -949,12 +949,19 @@ def constraint_context(info: ModelInfo, parameters: list[str]) -> dict:
             "constraint_common": common,
             "constraint_range_size": max([len(r) for r in ranges + common] + [1]),
             # each constraint's rows of J L^-1, written out up to a size
-            "constraint_eliminations": eliminations if size <= CONSTRAINT_UNROLLED else None}
+            "constraint_eliminations": eliminations if size <= CONSTRAINT_UNROLLED else None,
+            # and the Delassus matrix's blocks, pair by pair of constraints, up to a count
+            "constraint_blocks_written": (size <= CONSTRAINT_UNROLLED
+                                          and len(table) <= CONSTRAINT_BLOCKS_WRITTEN)}
 
 
 # the rows of J L^-1 are written out per constraint (constraints.c) up to this many
 # multiply-adds over all constraints: ANYmal C's four feet have 432
 CONSTRAINT_UNROLLED = 6000
+# the blocks of G = Z Y^T are written out per pair of constraints (their common runs as
+# constants: the loops unroll and vectorise) up to this many constraints (136 pairs); the
+# runs read from tables cost ANYmal C's four feet a fifth of the constrained dynamics
+CONSTRAINT_BLOCKS_WRITTEN = 16
 
 
 def _ancestors(parents: list[int], c: int) -> list[int]:
