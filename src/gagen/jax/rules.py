@@ -41,6 +41,12 @@ def mv(A, x):
 SMALL = 48
 
 
+def side_by_side(arrays):
+    """The arrays joined along their last axis, their other axes broadcast."""
+    lead = jnp.broadcast_shapes(*(a.shape[:-1] for a in arrays))
+    return jnp.concatenate([jnp.broadcast_to(a, lead + a.shape[-1:]) for a in arrays], -1)
+
+
 def add(total, term):
     return term if total is None else total + term
 
@@ -74,6 +80,27 @@ class Context:
     def zeros(self, like):
         return jnp.zeros(like.shape[:-1] + (self.nv,), like.dtype)
 
+    def by_configuration(self, q, A):
+        """A (..., m, nv), a derivative by the velocity directions, as the derivative by
+        q's own entries (..., m, nq): A times the map `velocity` applies to dq, which is
+        the identity for 1-dof joints (elementwise products only: XLA fuses them)."""
+        if not self.floating:
+            return A
+        pieces, iq, iv = [], 0, 0
+        for joint in self.joints:
+            if joint.type != "floating":
+                pieces.append(A[..., iv: iv + 1])
+                iq, iv = iq + 1, iv + 1
+                continue
+            quat = q[..., iq + 3: iq + 7]
+            R, Q = rotation_and_rates(quat)
+            scale = 4.0 / jnp.sum(quat * quat, axis=-1)
+            # v_lin = Rᵀ dp: A_lin Rᵀ; v_ang = scale Qᵀ dquat: scale A_ang Qᵀ
+            pieces.append(_times_transpose(A[..., iv: iv + 3], R))
+            pieces.append(scale[..., None, None] * _times_transpose(A[..., iv + 3: iv + 6], Q))
+            iq, iv = iq + 7, iv + 6
+        return side_by_side(pieces)
+
     def velocity(self, q, dq):
         """The velocity tangent (..., nv) of a tangent dq (..., nq) of the configuration
         (slices and products only: JAX transposes it)."""
@@ -95,6 +122,14 @@ class Context:
                 scale * mv(jnp.swapaxes(Q, -1, -2), dq[..., iq + 3: iq + 7]), lead + (3,)))
             iq += 7
         return jnp.concatenate(pieces, axis=-1)
+
+
+def _times_transpose(A, B):
+    """A Bᵀ over leading dimensions, (..., m, k) by (..., n, k), as k products summed."""
+    total = A[..., :, None, 0] * B[..., None, :, 0]
+    for k in range(1, A.shape[-1]):
+        total = total + A[..., :, None, k] * B[..., None, :, k]
+    return total
 
 
 def rotation_and_rates(quat):
@@ -135,16 +170,21 @@ def inverse_dynamics(ctx, x, dx, out):
 
 
 def forward_dynamics(ctx, x, dx, out):
+    """q̈'s tangent as one product: the Jacobian's blocks of the moving arguments side by
+    side, [∂q̈/∂q | ∂q̈/∂q̇ | M⁻¹] (…, nv, nq + 2 nv), times their tangents stacked. The
+    configuration block is by q's own entries (the velocity map folded into the matrix,
+    per state), so under jax.jacfwd the stacked tangents are jacfwd's basis, the same for
+    every state, and the product is one dot of all states' rows by that basis, written in
+    the Jacobian's own layout: no per-block products, sums or transposes over the batch."""
     q, qd, tau = x["q"], x["qd"], x["tau"]
     Aq, Aqd, Minv = ctx.call("forward_dynamics_derivatives", q, qd, tau)
-    total = None
-    if dx["q"] is not None:
-        total = add(total, mv(Aq, ctx.velocity(q, dx["q"])))
-    if dx["qd"] is not None:
-        total = add(total, mv(Aqd, dx["qd"]))
-    if dx["tau"] is not None:
-        total = add(total, mv(Minv, dx["tau"]))
-    return total
+    moving = [(a, block) for a, block in (("q", None), ("qd", Aqd), ("tau", Minv))
+              if dx[a] is not None]
+    if not moving:
+        return None
+    blocks = [ctx.by_configuration(q, Aq) if block is None else block for _, block in moving]
+    tangents = [dx[a] for a, _ in moving]
+    return jnp.einsum("...ij,...j->...i", side_by_side(blocks), side_by_side(tangents))
 
 
 def gravity(ctx, x, dx, out):
