@@ -72,6 +72,16 @@ class Context:
                                                       frame=self.frame), states)
         return found[0]
 
+    def forward_dynamics_jacobian(self, q, qd, tau):
+        """[∂q̈/∂v | ∂q̈/∂q̇ | M⁻¹] (..., nv, 3 nv) at this point (Ops.forward_dynamics_jacobian),
+        kept as `call` keeps results."""
+        key = ("forward_dynamics_jacobian", (id(q), id(qd), id(tau)))
+        found = self._calls.get(key)
+        if found is None:
+            found = self._calls[key] = (self.ops.forward_dynamics_jacobian(q, qd, tau, p=self.p),
+                                        (q, qd, tau))
+        return found[0]
+
     def called(self, name: str, *states):
         """The results of an earlier `call` with these very arrays, or None."""
         found = self._calls.get((name, tuple(id(s) for s in states)))
@@ -177,14 +187,17 @@ def forward_dynamics(ctx, x, dx, out):
     every state, and the product is one dot of all states' rows by that basis, written in
     the Jacobian's own layout: no per-block products, sums or transposes over the batch."""
     q, qd, tau = x["q"], x["qd"], x["tau"]
-    Aq, Aqd, Minv = ctx.call("forward_dynamics_derivatives", q, qd, tau)
-    moving = [(a, block) for a, block in (("q", None), ("qd", Aqd), ("tau", Minv))
-              if dx[a] is not None]
+    moving = [a for a in ("q", "qd", "tau") if dx[a] is not None]
     if not moving:
         return None
-    blocks = [ctx.by_configuration(q, Aq) if block is None else block for _, block in moving]
-    tangents = [dx[a] for a, _ in moving]
-    return jnp.einsum("...ij,...j->...i", side_by_side(blocks), side_by_side(tangents))
+    jacobian = ctx.forward_dynamics_jacobian(q, qd, tau)
+    if len(moving) < 3 or ctx.floating:
+        nv = ctx.nv
+        block = {"q": ctx.by_configuration(q, jacobian[..., :nv]),
+                 "qd": jacobian[..., nv: 2 * nv], "tau": jacobian[..., 2 * nv:]}
+        jacobian = side_by_side([block[a] for a in moving])
+    tangent = side_by_side([dx[a] for a in moving])
+    return jnp.einsum("...ij,...j->...i", jacobian, tangent)
 
 
 def gravity(ctx, x, dx, out):
@@ -299,9 +312,9 @@ def _parameters_inverse_dynamics(ctx, x, out, dpi):
 def _parameters_forward_dynamics(ctx, x, out, dpi):
     q = x["q"]
     dtau = mv(ctx.call("regressor", q, x["qd"], out), dpi)
-    derivatives = ctx.called("forward_dynamics_derivatives", q, x["qd"], x["tau"])
-    if derivatives is not None:  # the state's term computed M⁻¹ already
-        return -mv(derivatives[2], dtau)
+    jacobian = ctx.called("forward_dynamics_jacobian", q, x["qd"], x["tau"])
+    if jacobian is not None:  # the state's term computed M⁻¹ already
+        return -mv(jacobian[..., 2 * ctx.nv:], dtau)
     M = ctx.call("mass_matrix", q)
     M, dtau = jnp.broadcast_arrays(M, dtau[..., None])
     return -jnp.linalg.solve(M, dtau)[..., 0]
