@@ -9,6 +9,7 @@ tens of seconds to compile and are in the slow run."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 import textwrap
@@ -180,6 +181,44 @@ def test_a_batch_of_10000_states_is_one_vmapped_call():
     got = fd(q, qd, tau).block_until_ready()
     assert gj.ffi_calls() == before + 1
     close(got, dyn.forward_dynamics(q, qd, tau))
+
+
+@pytest.mark.parametrize("name", ["panda", "anymal"])
+def test_a_vmapped_jacfwd_is_one_ffi_call_and_one_product(name):
+    """jax.jit(jax.vmap(jax.jacfwd(forward_dynamics))) over (q, q̇, τ): one call of the
+    derivative kernel for the whole batch, then one dot of the Jacobian's blocks by jacfwd's
+    basis, in the Jacobian's own layout: no product per block or per column, no transpose
+    over the batch (the FFI's overhead over the stacked call, issue 29); equal to the
+    stacked derivatives."""
+    dyn, f = model(name), functions(name, "ffi")
+    q, qd, tau = state(dyn, 7, rows=32)
+    jac = jax.vmap(jax.jacfwd(f["forward_dynamics"], argnums=(0, 1, 2)))
+    program = str(jax.make_jaxpr(jac)(q, qd, tau))
+    compiled = jax.jit(jac).lower(q, qd, tau).compile()
+    hlo = compiled.as_text()
+    assert program.count("dot_general[") == 1
+    assert hlo.count('custom_call_target="gagen_kernel"') == 1  # the primal's call is dropped
+    # transposes: only of a floating base's rotation (per state), never of the basis' rows
+    basis = str(dyn.nq + 2 * dyn.nv)
+    shapes = re.findall(r"f64\[([\d,]*)\](?:\{[\d,]*\})? transpose\(", hlo)
+    shapes += re.findall(r":f64\[([\d,]*)\] = transpose\[", program)
+    assert all(basis not in shape.split(",") for shape in shapes), shapes
+    before = gj.ffi_calls()
+    got = jax.block_until_ready(compiled(q, qd, tau))
+    assert gj.ffi_calls() == before + 1
+    dq, dqd, dtau = dyn.forward_dynamics_derivatives(q, qd, tau)
+    tangent_maps = np.stack([_tangent_map(dyn, q[k]) for k in range(len(q))])
+    close(np.asarray(got[0]) @ tangent_maps, dq, 1e-11)
+    close(got[1], dqd)
+    close(got[2], dtau)
+    if name == "panda":  # float32: the kernel's blocks in double, rounded once (the dot by
+        # jacfwd's basis of ones and zeros is exact)
+        low = [x.astype(np.float32) for x in (q, qd, tau)]
+        got = jax.jit(jac)(*low)
+        want = dyn.forward_dynamics_derivatives(*(x.astype(np.float64) for x in low))
+        for g, w in zip(got, want):
+            assert g.dtype == jnp.float32
+            np.testing.assert_array_equal(np.asarray(g), w.astype(np.float32))
 
 
 @pytest.mark.parametrize("target", ["ffi", "callback"])

@@ -60,6 +60,7 @@ def shim_source() -> str:
                              undefined=jinja2.StrictUndefined)
     kernels = [{"table": k.table, "member": k.member, "inputs": k.inputs,
                 "outputs": k.outputs, "frame": k.frame, "status": k.status,
+                "blocks": k.blocks,
                 "arguments": k.c_arguments(), "out_widths": k.c_widths()}
                for k in KERNELS.values()]
     max_arrays = max(max(len(k.inputs) + 1, len(k.outputs)) for k in KERNELS.values())

@@ -43,6 +43,13 @@ class Ops:
         """The results of method `name` at `states` (in its argument order)."""
         raise NotImplementedError
 
+    def forward_dynamics_jacobian(self, q, qd, tau, p=None):
+        """[∂q̈/∂v | ∂q̈/∂q̇ | M⁻¹] side by side, (..., nv, 3 nv): forward dynamics'
+        derivative blocks as the one matrix its JVP rule multiplies."""
+        from gagen.jax.rules import side_by_side
+
+        return side_by_side(list(self.call("forward_dynamics_derivatives", q, qd, tau, p=p)))
+
     @staticmethod
     def lead(arrays) -> tuple[int, ...]:
         """The broadcast leading dimensions of arrays of one state each."""
@@ -92,18 +99,28 @@ class FFIOps(Ops):
         return found
 
     def call(self, name: str, *states, p=None, frame: int = -1):
+        method = METHODS[name]
+        return self.results(method, self._kernel(method.kernel, states, p, frame))
+
+    def forward_dynamics_jacobian(self, q, qd, tau, p=None):
+        """The derivative kernel's blocks joined side by side in the shim's C loop (one
+        pass over the batch, no join by XLA)."""
+        (jacobian,) = self._kernel("forward_dynamics_jacobian", (q, qd, tau), p, -1)
+        return jacobian
+
+    def _kernel(self, name: str, states, p, frame: int) -> list:
+        """The outputs of KERNELS[name] at states, shaped (lead..., per-state shape)."""
         from gagen.jax.ffi import call_kernel
 
-        method = METHODS[name]
-        kernel = KERNELS[method.kernel]
+        kernel = KERNELS[name]
         dtype = _dtype(states, p)
         slot, key = self.table(kernel.table)
         arrays = list(states) + ([] if p is None else [p])
         lead = self.lead(arrays)
-        shapes = self.shapes(method)
-        flat = call_kernel(self.ids[method.kernel], kernel, slot, key, list(states), p, frame,
+        shapes = output_shapes(kernel, self.sizes)
+        flat = call_kernel(self.ids[name], kernel, slot, key, list(states), p, frame,
                            lead, [int(np.prod(s)) for s in shapes], dtype)
-        return self.results(method, [f.reshape(lead + s) for f, s in zip(flat, shapes)])
+        return [f.reshape(lead + s) for f, s in zip(flat, shapes)]
 
 
 class CallbackOps(Ops):

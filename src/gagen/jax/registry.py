@@ -29,7 +29,9 @@ class Kernel:
     outputs' per-state shapes (each dimension a size field of the table: nq, nv, np, nb,
     nf, nreg; a number; or a tuple of those to multiply), whether it takes a frame index
     (after p) and then a reference (always LOCAL_WORLD_ALIGNED: the frame's origin, world
-    axes, the Dynamics methods' default) and whether it returns a status (0: success)."""
+    axes, the Dynamics methods' default), whether it returns a status (0: success), and
+    `blocks`: 0, or the number of square nv x nv blocks the member writes, which the shim
+    joins side by side (row by row) into the kernel's one output."""
 
     table: str
     member: str
@@ -38,12 +40,16 @@ class Kernel:
     frame: bool = False
     status: bool = False
     reference: bool = False
+    blocks: int = 0
 
     def c_arguments(self) -> str:
-        """The C call's arguments, from the shim's arrays `in` and `out` and `frame`."""
+        """The C call's arguments, from the shim's arrays `in` and `out` (or its square
+        `block`s, for a kernel whose blocks are joined) and `frame`."""
         names = [f"in[{k}]" for k in range(len(self.inputs) + 1)]
         names += ["frame"] if self.frame else []
         names += [str(LOCAL_WORLD_ALIGNED)] if self.reference else []
+        if self.blocks:
+            return ", ".join(names + [f"block[{k}]" for k in range(self.blocks)])
         return ", ".join(names + [f"out[{k}]" for k in range(len(self.outputs))])
 
     def c_widths(self) -> list[str]:
@@ -73,6 +79,12 @@ KERNELS: dict[str, Kernel] = {
                                            ("nq", "nv", "nv"),
                                            (("nv", "nv"), ("nv", "nv"), ("nv", "nv")),
                                            status=True),
+    # the same kernel, its three nv x nv blocks joined side by side into one (nv, 3 nv)
+    # Jacobian per state ([∂q̈/∂v | ∂q̈/∂q̇ | M⁻¹]): the form the JVP rule multiplies, written
+    # in the C loop (while the blocks are in cache) rather than joined by XLA over the batch
+    "forward_dynamics_jacobian": Kernel("derivatives", "forward_dynamics_derivatives",
+                                        ("nq", "nv", "nv"), (("nv", (3, "nv")),), status=True,
+                                        blocks=3),
     "coriolis_matrix": Kernel("derivatives", "coriolis_matrix", ("nq", "nv"), (("nv", "nv"),)),
     "linearize": Kernel("derivatives", "linearize", ("nq", "nv", "nv"),
                         (((2, "nv"), (2, "nv")), ((2, "nv"), "nv")), status=True),

@@ -41,6 +41,12 @@ def mv(A, x):
 SMALL = 48
 
 
+def side_by_side(arrays):
+    """The arrays joined along their last axis, their other axes broadcast."""
+    lead = jnp.broadcast_shapes(*(a.shape[:-1] for a in arrays))
+    return jnp.concatenate([jnp.broadcast_to(a, lead + a.shape[-1:]) for a in arrays], -1)
+
+
 def add(total, term):
     return term if total is None else total + term
 
@@ -66,6 +72,16 @@ class Context:
                                                       frame=self.frame), states)
         return found[0]
 
+    def forward_dynamics_jacobian(self, q, qd, tau):
+        """[∂q̈/∂v | ∂q̈/∂q̇ | M⁻¹] (..., nv, 3 nv) at this point (Ops.forward_dynamics_jacobian),
+        kept as `call` keeps results."""
+        key = ("forward_dynamics_jacobian", (id(q), id(qd), id(tau)))
+        found = self._calls.get(key)
+        if found is None:
+            found = self._calls[key] = (self.ops.forward_dynamics_jacobian(q, qd, tau, p=self.p),
+                                        (q, qd, tau))
+        return found[0]
+
     def called(self, name: str, *states):
         """The results of an earlier `call` with these very arrays, or None."""
         found = self._calls.get((name, tuple(id(s) for s in states)))
@@ -73,6 +89,27 @@ class Context:
 
     def zeros(self, like):
         return jnp.zeros(like.shape[:-1] + (self.nv,), like.dtype)
+
+    def by_configuration(self, q, A):
+        """A (..., m, nv), a derivative by the velocity directions, as the derivative by
+        q's own entries (..., m, nq): A times the map `velocity` applies to dq, which is
+        the identity for 1-dof joints (elementwise products only: XLA fuses them)."""
+        if not self.floating:
+            return A
+        pieces, iq, iv = [], 0, 0
+        for joint in self.joints:
+            if joint.type != "floating":
+                pieces.append(A[..., iv: iv + 1])
+                iq, iv = iq + 1, iv + 1
+                continue
+            quat = q[..., iq + 3: iq + 7]
+            R, Q = rotation_and_rates(quat)
+            scale = 4.0 / jnp.sum(quat * quat, axis=-1)
+            # v_lin = Rᵀ dp: A_lin Rᵀ; v_ang = scale Qᵀ dquat: scale A_ang Qᵀ
+            pieces.append(_times_transpose(A[..., iv: iv + 3], R))
+            pieces.append(scale[..., None, None] * _times_transpose(A[..., iv + 3: iv + 6], Q))
+            iq, iv = iq + 7, iv + 6
+        return side_by_side(pieces)
 
     def velocity(self, q, dq):
         """The velocity tangent (..., nv) of a tangent dq (..., nq) of the configuration
@@ -95,6 +132,14 @@ class Context:
                 scale * mv(jnp.swapaxes(Q, -1, -2), dq[..., iq + 3: iq + 7]), lead + (3,)))
             iq += 7
         return jnp.concatenate(pieces, axis=-1)
+
+
+def _times_transpose(A, B):
+    """A Bᵀ over leading dimensions, (..., m, k) by (..., n, k), as k products summed."""
+    total = A[..., :, None, 0] * B[..., None, :, 0]
+    for k in range(1, A.shape[-1]):
+        total = total + A[..., :, None, k] * B[..., None, :, k]
+    return total
 
 
 def rotation_and_rates(quat):
@@ -135,16 +180,24 @@ def inverse_dynamics(ctx, x, dx, out):
 
 
 def forward_dynamics(ctx, x, dx, out):
+    """q̈'s tangent as one product: the Jacobian's blocks of the moving arguments side by
+    side, [∂q̈/∂q | ∂q̈/∂q̇ | M⁻¹] (…, nv, nq + 2 nv), times their tangents stacked. The
+    configuration block is by q's own entries (the velocity map folded into the matrix,
+    per state), so under jax.jacfwd the stacked tangents are jacfwd's basis, the same for
+    every state, and the product is one dot of all states' rows by that basis, written in
+    the Jacobian's own layout: no per-block products, sums or transposes over the batch."""
     q, qd, tau = x["q"], x["qd"], x["tau"]
-    Aq, Aqd, Minv = ctx.call("forward_dynamics_derivatives", q, qd, tau)
-    total = None
-    if dx["q"] is not None:
-        total = add(total, mv(Aq, ctx.velocity(q, dx["q"])))
-    if dx["qd"] is not None:
-        total = add(total, mv(Aqd, dx["qd"]))
-    if dx["tau"] is not None:
-        total = add(total, mv(Minv, dx["tau"]))
-    return total
+    moving = [a for a in ("q", "qd", "tau") if dx[a] is not None]
+    if not moving:
+        return None
+    jacobian = ctx.forward_dynamics_jacobian(q, qd, tau)
+    if len(moving) < 3 or ctx.floating:
+        nv = ctx.nv
+        block = {"q": ctx.by_configuration(q, jacobian[..., :nv]),
+                 "qd": jacobian[..., nv: 2 * nv], "tau": jacobian[..., 2 * nv:]}
+        jacobian = side_by_side([block[a] for a in moving])
+    tangent = side_by_side([dx[a] for a in moving])
+    return jnp.einsum("...ij,...j->...i", jacobian, tangent)
 
 
 def gravity(ctx, x, dx, out):
@@ -259,9 +312,9 @@ def _parameters_inverse_dynamics(ctx, x, out, dpi):
 def _parameters_forward_dynamics(ctx, x, out, dpi):
     q = x["q"]
     dtau = mv(ctx.call("regressor", q, x["qd"], out), dpi)
-    derivatives = ctx.called("forward_dynamics_derivatives", q, x["qd"], x["tau"])
-    if derivatives is not None:  # the state's term computed M⁻¹ already
-        return -mv(derivatives[2], dtau)
+    jacobian = ctx.called("forward_dynamics_jacobian", q, x["qd"], x["tau"])
+    if jacobian is not None:  # the state's term computed M⁻¹ already
+        return -mv(jacobian[..., 2 * ctx.nv:], dtau)
     M = ctx.call("mass_matrix", q)
     M, dtau = jnp.broadcast_arrays(M, dtau[..., None])
     return -jnp.linalg.solve(M, dtau)[..., 0]
