@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import io
 import math
+import signal
 import threading
 import time
 
@@ -211,15 +212,27 @@ class LiveViewer:
             self.set_time(time_)
 
     def serve_forever(self) -> None:
-        """Play until `stop()` (or Ctrl-C, which stops the server and is raised again)."""
+        """Play until `stop()` (or Ctrl-C, which stops the server and is raised again).
+
+        In the main thread, Ctrl-C (SIGINT) only marks the loop to end after its frame: a
+        KeyboardInterrupt raised at any point could land inside the server's own locks and
+        leave its stop() waiting for ever."""
+        interrupted: list[bool] = []
+        previous = None
+        if threading.current_thread() is threading.main_thread():
+            previous = signal.signal(signal.SIGINT, lambda *_: interrupted.append(True))
         last = time.monotonic()
         try:
-            while not self._stopped.wait(1.0 / FPS):
+            while not interrupted and not self._stopped.wait(1.0 / FPS):
                 now = time.monotonic()
                 self.advance(now - last)
                 last = now
         finally:
+            if previous is not None:
+                signal.signal(signal.SIGINT, previous)
             self.stop()
+        if interrupted:
+            raise KeyboardInterrupt
 
     def stop(self) -> None:
         if not self._stopped.is_set():
