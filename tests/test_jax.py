@@ -266,11 +266,10 @@ def _derivative_cases(dyn, f, q, qd, tau, frame):
 SHARED_CASES = ("fd/q", "fd/tau", "id/qd", "M/q", "T/q", "pos/q")
 
 
-@pytest.mark.parametrize("target", ["ffi", "callback", "jax"])
-@pytest.mark.parametrize("name", ["rrr", "panda", "anymal"])
+# the other targets on the big robots: test_printed_* (slow)
+@pytest.mark.parametrize("name, target", [("rrr", "ffi"), ("rrr", "callback"), ("rrr", "jax"),
+                                          ("panda", "ffi"), ("anymal", "ffi")])
 def test_jacfwd_and_jacrev_equal_central_differences(name, target):
-    if target != "ffi" and name != "rrr":
-        pytest.skip("the other targets on the big robots: test_printed_* (slow)")
     dyn, f = model(name), functions(name, target)
     q, qd, tau = state(dyn, 5)
     for label, fun, ref, x in _derivative_cases(dyn, f, q, qd, tau, FRAMES[name]):
@@ -284,11 +283,10 @@ def test_jacfwd_and_jacrev_equal_central_differences(name, target):
             assert err <= 1e-6 * scale, f"{label} {mode.__name__}: {err:.3g} (scale {scale:.3g})"
 
 
-@pytest.mark.parametrize("target", ["ffi", "jax"])
-@pytest.mark.parametrize("name", ["rrr", "panda", "anymal"])
+# the printed programs of the big robots: test_printed_* (slow)
+@pytest.mark.parametrize("name, target", [("rrr", "ffi"), ("rrr", "jax"), ("panda", "ffi"),
+                                          ("anymal", "ffi")])
 def test_the_jacobians_are_gagens_analytic_derivatives(name, target):
-    if target == "jax" and name != "rrr":
-        pytest.skip("the printed programs of the big robots: test_printed_* (slow)")
     dyn, f = model(name), functions(name, target)
     q, qd, tau = state(dyn, 6)
     fd = dyn.forward_dynamics_derivatives(q, qd, tau)
