@@ -214,9 +214,10 @@ class LiveViewer:
     def serve_forever(self) -> None:
         """Play until `stop()` (or Ctrl-C, which stops the server and is raised again).
 
-        In the main thread, Ctrl-C (SIGINT) only marks the loop to end after its frame: a
-        KeyboardInterrupt raised at any point could land inside the server's own locks and
-        leave its stop() waiting for ever."""
+        In the main thread, Ctrl-C (SIGINT) gets a handler of its own that marks the loop to
+        end after its frame: a process started in the background by a non-interactive shell
+        inherits SIGINT ignored, and Python then raises no KeyboardInterrupt, so the viewer
+        would never stop (as a CI run's `view` did)."""
         interrupted: list[bool] = []
         previous = None
         if threading.current_thread() is threading.main_thread():
