@@ -94,7 +94,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "04344fd50bb546fc617368c77729b79989e9d9a7e1b4daa075b5035a38063b74") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "4a6a8c3c8f4f0b4978303d26bd46b7da6e503c546de7aca4d84e38b416b3e2e8") < 0) {
         Py_DECREF(module);
         return NULL;
     }

@@ -243,3 +243,19 @@ def regressor_names(bodies, joints) -> list[str]:
     `friction_<joint>` and `armature_<joint>`."""
     names = [f"{key}_{body}" for body in bodies for key in BODY_PARAMETERS]
     return names + [f"{key}_{joint}" for key in JOINT_PARAMETERS for joint in joints]
+
+
+def dof_parents(bodies, n: int) -> list[int]:
+    """Per velocity coordinate, the one before it on its path to the world (-1: none), from
+    the tree (parent, joint kind, first coordinate) per body: Featherstone's λ, the sparsity
+    of M that its factorisation M = Lᵀ D L keeps (the generated C's and the runtime's)."""
+    sizes = {JOINT_KINDS["fixed"]: 0, JOINT_KINDS["floating"]: 6}
+    last: list[int] = []  # per body, the last coordinate on its path (-1: none)
+    out = [-1] * n
+    for parent, kind, column in bodies:
+        before = last[parent] if parent >= 0 else -1
+        size = sizes.get(kind, 1)
+        for k in range(size):
+            out[column + k] = before if k == 0 else column + k - 1
+        last.append(column + size - 1 if size else before)
+    return out

@@ -20,7 +20,7 @@ from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE, precedence
 
 from .. import __version__
-from ..manifest import FRICTION_WIDTH, JOINT_KINDS, QUATERNION_RESTORING, ModelInfo
+from ..manifest import FRICTION_WIDTH, JOINT_KINDS, QUATERNION_RESTORING, ModelInfo, dof_parents
 from ..symbolic.centroidal import centroidal_program
 from ..symbolic.differentiate import needed_definitions
 from ..symbolic.frames import OFFSET_SIZE, TRANSFORM_SIZE, add_frame_kinematics
@@ -993,22 +993,6 @@ def _path_coordinates(info: ModelInfo, frame: str) -> set[int]:
         parent, kind, column = info.bodies[body]
         out.update(range(column, column + sizes.get(kind, 1)))
         body = parent
-    return out
-
-
-def dof_parents(bodies, n: int) -> list[int]:
-    """Per velocity coordinate, the one before it on its path to the world (-1: none), from
-    the tree (parent, joint kind, first coordinate) per body: Featherstone's λ, the sparsity
-    of M that the task-space factorisation M = Lᵀ D L keeps."""
-    sizes = {JOINT_KINDS["fixed"]: 0, JOINT_KINDS["floating"]: 6}
-    last: list[int] = []  # per body, the last coordinate on its path (-1: none)
-    out = [-1] * n
-    for parent, kind, column in bodies:
-        before = last[parent] if parent >= 0 else -1
-        size = sizes.get(kind, 1)
-        for k in range(size):
-            out[column + k] = before if k == 0 else column + k - 1
-        last.append(column + size - 1 if size else before)
     return out
 
 

@@ -39,6 +39,7 @@ import math
 
 import numpy as np
 
+from ..manifest import dof_parents
 from .constraints import active_rows
 from .frames import FLOATING, pose
 
@@ -374,21 +375,6 @@ def _plan(dyn, mask):
     if len(kept) < 256:
         kept[key] = found
     return found
-
-
-def dof_parents(bodies, n: int) -> list[int]:
-    """Per velocity coordinate, the one before it on its path to the world (-1: none):
-    Featherstone's λ, the sparsity of M's factors M = Lᵀ D L (codegen.render's dof_parents,
-    which the runtime does not import)."""
-    last: list[int] = []  # per body, the last coordinate on its path (-1: none)
-    out = [-1] * n
-    for parent, kind, column in bodies:
-        before = last[parent] if parent >= 0 else -1
-        size = 6 if kind == FLOATING else (1 if kind else 0)
-        for k in range(size):
-            out[column + k] = before if k == 0 else column + k - 1
-        last.append(column + size - 1 if size else before)
-    return out
 
 
 def _layout(dyn, mask):
