@@ -16,6 +16,12 @@ Which derivatives are analytic (gagen.casadi.table has the details):
 - forward_dynamics, inverse_dynamics, gravity, mass_matrix: by q, qd, tau/qdd from the
   derivative module (forward/inverse_dynamics_derivatives, the mass matrix, M^-1);
 - frame_placement, frame_jacobian, frame_velocity: from the frame Jacobian;
+- frame_acceleration, frame_bias_acceleration, frame_jacobian_time_variation: by q and qd
+  the model's task-space derivative kernels (<model>_frame_acceleration_derivatives,
+  <model>_frame_jacobian_time_variation_derivatives: spatial algebra on the frame's path),
+  by qdd the frame Jacobian;
+- delassus: dG = dJ Y + Y^T dJ^T - Y^T dM Y (Y = M^-1 J^T), dJ from the frame Jacobian and
+  dM y from inverse_dynamics_derivatives;
 - coriolis_matrix: exact by qd (C is linear in qd), central differences of the compiled C
   by q;
 - by the parameters p (the `_p` functions, `parameters=True`): for inverse_dynamics,

@@ -368,36 +368,22 @@ CENTROIDAL_BIAS = Entry(
 
 # --- task space (where the model's C has it): LOCAL_WORLD_ALIGNED, classical accelerations ---
 
-def _central_by(output: str, inputs: tuple[int, ...]) -> str:
-    """C: central differences of the entry's value into D_<output>_<input> for each input
-    number (0: q by its nq entries, 1: qd); returns the first failure."""
-    names = {0: "q", 1: "qd"}
-    calls = "\n".join(f"""    {{{{
-        double *blocks[1] = {{{{D_{output}_{names[k]}}}}};
-        status = gc_central(GC_SELF, frame, in, {k}, blocks, ws);
-        if (status) return status;
-    }}}}""" for k in inputs)
-    return f"\n    int status;\n{calls}\n    return 0;"
-
-
 FRAME_ACCELERATION = Entry(
     name="frame_acceleration",
     inputs=(_q(), _v("qd"), _v("qdd")),
     outputs=(Port("a", 6),),
     value="return {ident}_frame_acceleration(q, qd, qdd, p, frame, GAGEN_LOCAL_WORLD_ALIGNED, "
           "GAGEN_CLASSICAL, a);",
-    # a = J qdd + dJ/dt qd: by qdd the frame Jacobian, exact; by q and qd central differences
+    # a = J qdd + dJ/dt qd: by qdd the frame Jacobian; by q and qd the task-space derivative
+    # kernel (spatial algebra on the frame's path)
     jacobian="""
-    {{
-        int rc = {ident}_frame_jacobian(q, p, frame GC_LWA, D_a_qdd);
-        if (rc) return rc;
-    }}""" + _central_by("a", (0, 1)),
-    work=lambda s: 2 * s["central"],
-    tangent=False,
+    int rc = {ident}_frame_jacobian(q, p, frame GC_LWA, D_a_qdd);
+    if (rc) return rc;
+    return {ident}_frame_acceleration_derivatives(q, qd, qdd, p, frame, D_a_q, D_a_qd);""",
     per_frame=True,
-    requires=("frame_acceleration", "frame_jacobian"),
+    requires=("frame_acceleration", "frame_jacobian", "frame_acceleration_derivatives"),
     doc="a = frame_acceleration(q, qd, qdd, frame) (classical, LOCAL_WORLD_ALIGNED): by qdd "
-        "the frame Jacobian, by q and qd central differences",
+        "the frame Jacobian, by q and qd frame_acceleration_derivatives",
 )
 
 FRAME_BIAS_ACCELERATION = Entry(
@@ -406,13 +392,12 @@ FRAME_BIAS_ACCELERATION = Entry(
     outputs=(Port("a", 6),),
     value="return {ident}_frame_bias_acceleration(q, qd, p, frame, "
           "GAGEN_LOCAL_WORLD_ALIGNED, GAGEN_CLASSICAL, a);",
-    jacobian=_central_by("a", (0, 1)),
-    work=lambda s: 2 * s["central"],
-    tangent=False,
+    jacobian="return {ident}_frame_acceleration_derivatives(q, qd, NULL, p, frame, D_a_q, "
+             "D_a_qd);",
     per_frame=True,
-    requires=("frame_bias_acceleration",),
+    requires=("frame_bias_acceleration", "frame_acceleration_derivatives"),
     doc="a = frame_bias_acceleration(q, qd, frame) = dJ/dt qd (classical, "
-        "LOCAL_WORLD_ALIGNED): central differences",
+        "LOCAL_WORLD_ALIGNED): frame_acceleration_derivatives at qdd = 0",
 )
 
 FRAME_JACOBIAN_TIME_VARIATION = Entry(
@@ -421,10 +406,13 @@ FRAME_JACOBIAN_TIME_VARIATION = Entry(
     outputs=(Port("dJ", 6, "nv"),),
     value="return {ident}_frame_jacobian_time_variation(q, qd, p, frame, "
           "GAGEN_LOCAL_WORLD_ALIGNED, dJ);",
+    jacobian="return {ident}_frame_jacobian_time_variation_derivatives(q, qd, p, frame, "
+             "D_dJ_q, D_dJ_qd);",
     per_frame=True,
-    requires=("frame_jacobian_time_variation",),
-    doc="dJ = frame_jacobian_time_variation(q, qd, frame) (LOCAL_WORLD_ALIGNED): central "
-        "differences",
+    requires=("frame_jacobian_time_variation",
+              "frame_jacobian_time_variation_derivatives"),
+    doc="dJ = frame_jacobian_time_variation(q, qd, frame) (LOCAL_WORLD_ALIGNED): "
+        "frame_jacobian_time_variation_derivatives (by qd it is dJ/dq)",
 )
 
 # The operational-space inertia is G's inverse: singular wherever a frame has fewer than six
@@ -436,10 +424,70 @@ DELASSUS = Entry(
     outputs=(Port("G", 6, 6),),
     value="""double work[6 * NV];
     return {ident}_delassus(q, p, 1, &frame, 6, work, G);""",
+    # dG = dJ Y + Y^T dJ^T - Y^T dM Y with Y = M^-1 J^T: dJ from J's own columns
+    # (gc_jacobian_derivative), dM y_b = d(M y_b)/dq = dtau/dq at (q, 0, y_b) less at (q, 0, 0)
+    # (inverse_dynamics_derivatives: damping and friction vanish at qd = 0)
+    jacobian="""
+    double *J, *dJ, *L, *Y, *g, *dMy, *dqd;
+    int a, b, i, k, rc;
+    GC_TAKE(J, 6 * NV);
+    GC_TAKE(dJ, 6 * NV * NV);
+    GC_TAKE(L, NV * NV);
+    GC_TAKE(Y, 6 * NV);
+    GC_TAKE(g, NV * NV);
+    GC_TAKE(dMy, 6 * NV * NV);
+    GC_TAKE(dqd, NV * NV);
+    rc = {ident}_frame_jacobian(q, p, frame GC_LWA, J);
+    if (rc) return rc;
+    gc_jacobian_derivative(frame, J, dJ);
+    {ident}_mass_matrix(q, p, L);
+    for (k = 0; k < NV; ++k) {{  /* M = L L^T in place (lower); not positive definite: fail */
+        double d = L[k * NV + k];
+        for (i = 0; i < k; ++i) d -= L[k * NV + i] * L[k * NV + i];
+        if (!(d > 0.0)) return 1;
+        L[k * NV + k] = d = sqrt(d);
+        for (a = k + 1; a < NV; ++a) {{
+            double s = L[a * NV + k];
+            for (i = 0; i < k; ++i) s -= L[a * NV + i] * L[k * NV + i];
+            L[a * NV + k] = s / d;
+        }}
+    }}
+    for (a = 0; a < 6; ++a) {{  /* y_a = M^-1 (row a of J) */
+        double *y = Y + a * NV;
+        for (i = 0; i < NV; ++i) {{
+            double s = J[a * NV + i];
+            for (k = 0; k < i; ++k) s -= L[i * NV + k] * y[k];
+            y[i] = s / L[i * NV + i];
+        }}
+        for (i = NV - 1; i >= 0; --i) {{
+            double s = y[i];
+            for (k = i + 1; k < NV; ++k) s -= L[k * NV + i] * y[k];
+            y[i] = s / L[i * NV + i];
+        }}
+    }}
+    {ident}_inverse_dynamics_derivatives(q, gc_zeros, gc_zeros, p, g, dqd);
+    for (b = 0; b < 6; ++b) {{
+        double *d = dMy + (long)b * NV * NV;
+        {ident}_inverse_dynamics_derivatives(q, gc_zeros, Y + b * NV, p, d, dqd);
+        for (i = 0; i < NV * NV; ++i) d[i] -= g[i];
+    }}
+    for (a = 0; a < 6; ++a)
+        for (b = 0; b <= a; ++b)
+            for (k = 0; k < NV; ++k) {{
+                const double *ya = Y + a * NV, *yb = Y + b * NV;
+                const double *d = dMy + (long)b * NV * NV;
+                double s = 0.0;
+                for (i = 0; i < NV; ++i)
+                    s += dJ[(a * NV + i) * NV + k] * yb[i] + ya[i] * dJ[(b * NV + i) * NV + k]
+                         - ya[i] * d[i * NV + k];
+                D_G_q[(a * 6 + b) * NV + k] = D_G_q[(b * 6 + a) * NV + k] = s;
+            }}
+    return 0;""",
+    work=lambda s: 12 * s["nv"] + 15 * s["nv"] ** 2,
     per_frame=True,
-    requires=("delassus",),
+    requires=("delassus", "frame_jacobian", "mass_matrix", "inverse_dynamics_derivatives"),
     doc="G = delassus(q, frame) = J M^-1 J^T of the frame's LOCAL_WORLD_ALIGNED Jacobian "
-        "(M factorised, never inverted): central differences",
+        "(M factorised, never inverted): dG from dJ and inverse_dynamics_derivatives' dM",
 )
 
 # The table: the order of the dictionary gagen.casadi.functions returns.
