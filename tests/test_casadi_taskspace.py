@@ -62,11 +62,16 @@ class Robot:
         self.twin = Twin(dyn, model)
         lib = ctypes.CDLL(dyn.module.__file__)
         double_p = np.ctypeslib.ndpointer(np.float64, flags="C")
-        self._acc = getattr(lib, f"{dyn.info.name}_frame_acceleration_derivatives")
+        from gagen.casadi.build import model_ident
+
+        ident = model_ident(dyn)
+        self._acc = getattr(lib, f"{ident}_frame_acceleration_derivatives")
         self._acc.argtypes = [double_p, double_p, ctypes.c_void_p, double_p, ctypes.c_int,
                               double_p, double_p]
-        self._dj = getattr(lib, f"{dyn.info.name}_frame_jacobian_time_variation_derivatives")
+        self._dj = getattr(lib, f"{ident}_frame_jacobian_time_variation_derivatives")
         self._dj.argtypes = [double_p, double_p, double_p, ctypes.c_int, double_p, double_p]
+        self._dc = getattr(lib, f"{ident}_coriolis_matrix_derivatives")
+        self._dc.argtypes = [double_p, double_p, double_p, ctypes.c_void_p, double_p]
         self.p = dyn.parameter_vector()
         # the frames checked: every one of a small model, a spread and the feet otherwise
         frames = dyn.frames
@@ -94,6 +99,14 @@ class Robot:
         dq, dqd = np.empty((6, n, n)), np.empty((6, n, n))
         assert self._dj(q, qd, self.p, self.dyn.frames.index(frame), dq, dqd) == 0
         return dq, dqd
+
+
+    def coriolis_derivatives(self, q, qd):
+        """dC/dq, (nv, nv, nv): [i, j, k] = d C_ij / dq_k along the velocity directions."""
+        n = self.dyn.nv
+        out = np.empty((n, n, n))
+        assert self._dc(q, qd, self.p, None, out) == 0
+        return out
 
 
 @functools.cache
@@ -312,3 +325,42 @@ def test_delassus_jacobian_matches_its_formula_on_pinocchio_s_terms(casadi_robot
         # CasADi's rows are G's entries column-major: b 6 + a
         close(ours.reshape(6, 6, dyn.nv).transpose(1, 0, 2), expected, f"{frame} dG/dq",
               PINOCCHIO)
+
+
+# ------------------------------------------------------------------ the Coriolis matrix
+
+def test_coriolis_derivative_matches_central_differences(robot):
+    """<model>_coriolis_matrix_derivatives against five-point differences of gagen's
+    coriolis_matrix along the velocity directions (Pinocchio has no dC/dq)."""
+    dyn = robot.dyn
+    rng = np.random.default_rng(10)
+    for _ in range(2):
+        q, qd, _ = random_state(dyn, rng)
+        close(robot.coriolis_derivatives(q, qd),
+              tangent_differences(lambda x, qd=qd: dyn.coriolis_matrix(x, qd), dyn, q),
+              "dC/dq", DIFFERENCES)
+
+
+def test_coriolis_derivative_meets_mdot_identity(casadi_robot):
+    """Mdot = C + C^T, differentiated: d Mdot/dq_k = dC/dq_k + (dC/dq_k)^T, with
+    Mdot(q, qd) = sum_j dM/dq_j qd_j from the CasADi mass matrix's analytic Jacobian (the
+    inverse-dynamics derivatives) and its derivative by central differences; and CasADi's
+    jacobian() of coriolis_matrix by q is the kernel."""
+    robot = casadi_robot
+    dyn = robot.dyn
+    n = dyn.nv
+    mass = robot.fns["mass_matrix"]
+    s = ca.MX.sym("q", dyn.nq)
+    jac_m = ca.Function("jm", [s], [ca.jacobian(ca.vec(mass(s)), s)])
+    q, qd, _ = random_state(dyn, np.random.default_rng(11))
+
+    def mdot(x):  # CasADi's entries column-major: row j n + i is M[i, j]
+        dM = np.array(jac_m(x).full()) @ tangent_map(dyn, x)
+        return (dM @ qd).reshape(n, n).T
+
+    dC = robot.coriolis_derivatives(q, qd)
+    close(dC + dC.transpose(1, 0, 2), tangent_differences(mdot, dyn, q),
+          "d(C + C^T)/dq = d Mdot/dq", DIFFERENCES)
+    by_q = casadi_jacobians(robot.fns["coriolis_matrix"], q, qd, qd, 0)["q"]
+    close(by_q @ tangent_map(dyn, q), dC.transpose(1, 0, 2).reshape(n * n, n),
+          "CasADi's dC/dq", TIGHT)

@@ -185,11 +185,12 @@ CORIOLIS_MATRIX = Entry(
     inputs=(_q(), _v("qd")),
     outputs=(Port("C", "nv", "nv"),),
     value="{ident}_coriolis_matrix(q, qd, p, C);\n    return 0;",
-    # C is linear in qd: dC/dqd_k = C(q, e_k), exact; dC/dq by central differences (no
-    # kernel of second derivatives of M), over q's nq entries
+    # C is linear in qd: dC/dqd_k = C(q, e_k), exact; dC/dq from the model's kernel
+    # coriolis_matrix_derivatives (Pinocchio's C differentiated in forward mode by spatial
+    # algebra: each coordinate moves its subtree rigidly)
     jacobian="""
     double *e, *Ck;
-    int i, k, status;
+    int i, k;
     GC_TAKE(e, NV);
     GC_TAKE(Ck, NV * NV);
     for (k = 0; k < NV; ++k) e[k] = 0.0;
@@ -199,16 +200,11 @@ CORIOLIS_MATRIX = Entry(
         e[k] = 0.0;
         for (i = 0; i < NV * NV; ++i) D_C_qd[i * NV + k] = Ck[i];
     }}
-    {{
-        double *blocks[1] = {{D_C_q}};
-        status = gc_central(GC_SELF, frame, in, 0, blocks, ws);
-    }}
-    return status;""",
-    work=lambda s: s["nv"] + s["nv"] ** 2 + s["central"],
-    tangent=False,
-    requires=("coriolis_matrix",),
-    doc="C = coriolis_matrix(q, qd): dC/dqd exact (C is linear in qd), dC/dq by central "
-        "differences of the compiled C",
+    return {ident}_coriolis_matrix_derivatives(q, qd, p, NULL, D_C_q);""",
+    work=lambda s: s["nv"] + s["nv"] ** 2,
+    requires=("coriolis_matrix", "coriolis_matrix_derivatives"),
+    doc="C = coriolis_matrix(q, qd): dC/dqd exact (C is linear in qd), dC/dq from "
+        "coriolis_matrix_derivatives",
 )
 
 FRAME_PLACEMENT = Entry(
