@@ -906,6 +906,488 @@ int rrr_operational_space_inertia(const double *q, const double *p, int count,
 }
 
 /* ---------------------------------------------------------------------------------------
+ * Task-space derivatives: a frame's classical acceleration and its Jacobian's time
+ * variation (LOCAL_WORLD_ALIGNED) differentiated by q (along the velocity directions, as
+ * the dynamics derivatives are) and by qd, by spatial algebra on the frame's path, O(path)
+ * for the acceleration and O(path^2) for J's time variation.
+ *
+ * Spatial motion vectors here are (linear, angular) in world axes at the world's origin:
+ * coordinate k's column S_k (a revolute joint at o with axis s: (o x s, s); a prismatic
+ * one: (s, 0); a floating joint's six: its body's axes e, as (e, 0) and (o x e, e)). Moving
+ * coordinate j moves rigidly every body it carries, so dS_k/dq_j = S_j x S_k for j an
+ * ancestor-or-self of k (a floating joint's six count as one body), 0 otherwise; with V^-_j
+ * and A^-_j the velocity and acceleration of the body above j's joint, V^+_j its own body's:
+ *   V = sum S_k qd_k                    A = sum (V^+_k x S_k) qd_k + S_k qdd_k
+ *   dV/dq_j = S_j x (V - V^-_j)         dA/dq_j = S_j x (A - A^-_j) - (S_j x V^-_j) x (V - V^-_j)
+ *   dV/dqd_j = S_j                      dA/dqd_j = S_j x (V - V^-_j - V^+_j)
+ * (the Jacobi identity joins the two terms of dA/dq_j, as Pinocchio's
+ * computeForwardKinematicsDerivatives does). The frame's point p moves by S_j's velocity
+ * at p; the classical acceleration at p is A_lin + A_ang x p + omega x v_p. Tested against
+ * Pinocchio's getFrameAccelerationDerivatives and central differences (tests/test_casadi.py,
+ * tests/test_casadi_taskspace.py).
+ * ------------------------------------------------------------------------------------- */
+
+/* The frame's path: per column (root first) its coordinate, its body's place on the path,
+ * S, and V^-, A^-, V^+ of its joint; V and A of the frame's body. */
+typedef struct {
+    int m;
+    int cols[GAGEN_FR_NV], level[GAGEN_FR_NV];
+    double S[6 * GAGEN_FR_NV], Vm[6 * GAGEN_FR_NV], Am[6 * GAGEN_FR_NV], Vp[6 * GAGEN_FR_NV];
+    double V[6], A[6];
+} gagen_td_path;
+
+/* c = a x b of motion vectors (c is neither a nor b) */
+static void gagen_td_cross(const double *a, const double *b, double *c)
+{
+    gagen_cross(a + 3, b, c);
+    gagen_cross_add(a, b + 3, 1.0, c);
+    gagen_cross(a + 3, b + 3, c + 3);
+}
+
+/* out = m's linear velocity at the point pos: m_lin + m_ang x pos */
+static void gagen_td_at(const double *m, const double *pos, double *out)
+{
+    int i;
+    for (i = 0; i < 3; ++i) out[i] = m[i];
+    gagen_cross_add(m + 3, pos, 1.0, out);
+}
+
+/* The columns, velocities and accelerations (qdd NULL: 0) on the path of body b, placed
+ * in X. */
+static void gagen_td_motion(const double *X, int b, const double *qd, const double *qdd,
+                            gagen_td_path *t)
+{
+    int path[GAGEN_FR_NB], n = 0, level, i, k;
+    for (; b >= 0; b = gagen_parent[b]) path[n++] = b;
+    t->m = 0;
+    for (i = 0; i < 6; ++i) t->V[i] = t->A[i] = 0.0;
+    for (level = 0; n-- > 0; ++level) {
+        const int c = path[n], kind = gagen_kind[c], first = t->m;
+        const double *Rc = X + 15 * c, *o = Rc + 9, *axis = Rc + 12;
+        double Vm[6], Am[6];
+        if (kind == 0) continue;
+        for (k = 0; k < (kind == 3 ? 6 : 1); ++k) {
+            double *S = t->S + 6 * t->m;
+            const int slides = kind == 2 || (kind == 3 && k < 3);
+            for (i = 0; i < 3; ++i) {
+                const double e = kind == 3 ? Rc[3 * i + k % 3] : axis[i];
+                S[i] = slides ? e : 0.0;
+                S[3 + i] = slides ? 0.0 : e;
+            }
+            if (!slides) gagen_cross(o, S + 3, S);
+            t->cols[t->m] = gagen_column[c] + k;
+            t->level[t->m++] = level;
+        }
+        for (i = 0; i < 6; ++i) {
+            Vm[i] = t->V[i];
+            Am[i] = t->A[i];
+        }
+        for (k = first; k < t->m; ++k)
+            for (i = 0; i < 6; ++i) t->V[i] += t->S[6 * k + i] * qd[t->cols[k]];
+        for (k = first; k < t->m; ++k) {
+            const double *S = t->S + 6 * k;
+            double VxS[6];
+            gagen_td_cross(t->V, S, VxS);
+            for (i = 0; i < 6; ++i)
+                t->A[i] += VxS[i] * qd[t->cols[k]] + (qdd != NULL ? S[i] * qdd[t->cols[k]] : 0.0);
+        }
+        for (k = first; k < t->m; ++k)
+            for (i = 0; i < 6; ++i) {
+                t->Vm[6 * k + i] = Vm[i];
+                t->Am[6 * k + i] = Am[i];
+                t->Vp[6 * k + i] = t->V[i];
+            }
+    }
+}
+
+/* dV/dq_j = S_j x (V - V^-_j) of column c, and d v_p/dq_j (the frame point's velocity
+ * v_p = V_lin + omega x p, p moving by pd = S_j's velocity at p) */
+static void gagen_td_velocity_by_q(const gagen_td_path *t, int c, const double *pos,
+                                   const double *pd, double *dV, double *dvp)
+{
+    double x[6];
+    int i;
+    for (i = 0; i < 6; ++i) x[i] = t->V[i] - t->Vm[6 * c + i];
+    gagen_td_cross(t->S + 6 * c, x, dV);
+    gagen_td_at(dV, pos, dvp);
+    gagen_cross_add(t->V + 3, pd, 1.0, dvp);
+}
+
+int rrr_frame_acceleration_derivatives(const double *q, const double *qd,
+                                               const double *qdd, const double *p, int frame,
+                                               double *da_dq, double *da_dqd)
+{
+    double X[15 * GAGEN_FR_NB], R[9], pos[3], vp[3];
+    const double *omega;
+    gagen_td_path t;
+    int c, i;
+    if (frame < 0 || frame >= GAGEN_FR_NF) return GAGEN_ERR_BAD_ARG;
+    for (i = 0; i < 6 * GAGEN_FR_NV; ++i) da_dq[i] = da_dqd[i] = 0.0;
+    gagen_place_frame(q, p, frame, X, R, pos);
+    gagen_td_motion(X, gagen_frame_body[frame], qd, qdd, &t);
+    omega = t.V + 3;
+    gagen_td_at(t.V, pos, vp);
+    for (c = 0; c < t.m; ++c) {
+        const double *S = t.S + 6 * c, *Vm = t.Vm + 6 * c;
+        double pd[3], dV[6], dvp[3], dA[6], x[6], y[6], z[6], out[6];
+        const int j = t.cols[c];
+        gagen_td_at(S, pos, pd);
+        /* by q_j: a_lin = A_lin + A_ang x p + omega x v_p, each factor differentiated */
+        gagen_td_velocity_by_q(&t, c, pos, pd, dV, dvp);
+        for (i = 0; i < 6; ++i) {
+            x[i] = t.A[i] - t.Am[6 * c + i];
+            y[i] = t.V[i] - Vm[i];
+        }
+        gagen_td_cross(S, x, dA);
+        gagen_td_cross(S, Vm, x);
+        gagen_td_cross(x, y, z);
+        for (i = 0; i < 6; ++i) dA[i] -= z[i];
+        gagen_td_at(dA, pos, out);
+        gagen_cross_add(t.A + 3, pd, 1.0, out);
+        gagen_cross_add(dV + 3, vp, 1.0, out);
+        gagen_cross_add(omega, dvp, 1.0, out);
+        for (i = 0; i < 3; ++i) {
+            da_dq[GAGEN_FR_NV * i + j] = out[i];
+            da_dq[GAGEN_FR_NV * (3 + i) + j] = dA[3 + i];
+        }
+        /* by qd_j: V by S_j, A by S_j x (V - V^-_j - V^+_j), v_p by pd */
+        for (i = 0; i < 6; ++i) x[i] = t.V[i] - Vm[i] - t.Vp[6 * c + i];
+        gagen_td_cross(S, x, dA);
+        gagen_td_at(dA, pos, out);
+        gagen_cross_add(S + 3, vp, 1.0, out);
+        gagen_cross_add(omega, pd, 1.0, out);
+        for (i = 0; i < 3; ++i) {
+            da_dqd[GAGEN_FR_NV * i + j] = out[i];
+            da_dqd[GAGEN_FR_NV * (3 + i) + j] = dA[3 + i];
+        }
+    }
+    return 0;
+}
+
+/* J's column k is T(p) S_k (S_k's velocity at p, then its angular part) and its time
+ * variation T(p) X_k + (S_k,ang x v_p, 0) with X_k = V^+_k x S_k. By q_i (i on the path):
+ *   dX_k = S_i x X_k - (S_i x V^-_i) x S_k     and dS_k = S_i x S_k   (i ancestor-or-self of k)
+ *   d(T(p) Y) = T(p) dY + (Y_ang x pd_i, 0)    and dv_p as for the acceleration
+ * By qd_i it is dJ_k/dq_i: J's time variation is sum_i (dJ/dq_i) qd_i. */
+int rrr_frame_jacobian_time_variation_derivatives(const double *q, const double *qd,
+                                                          const double *p, int frame,
+                                                          double *ddJ_dq, double *ddJ_dqd)
+{
+    double X[15 * GAGEN_FR_NB], R[9], pos[3], vp[3];
+    double pd[3 * GAGEN_FR_NV], dvp[3 * GAGEN_FR_NV], Xk[6 * GAGEN_FR_NV];
+    gagen_td_path t;
+    int a, b, i;
+    const long size = 6L * GAGEN_FR_NV * GAGEN_FR_NV;
+    long l;
+    if (frame < 0 || frame >= GAGEN_FR_NF) return GAGEN_ERR_BAD_ARG;
+    for (l = 0; l < size; ++l) ddJ_dq[l] = ddJ_dqd[l] = 0.0;
+    gagen_place_frame(q, p, frame, X, R, pos);
+    gagen_td_motion(X, gagen_frame_body[frame], qd, NULL, &t);
+    gagen_td_at(t.V, pos, vp);
+    for (a = 0; a < t.m; ++a) {
+        double dV[6];
+        gagen_td_at(t.S + 6 * a, pos, pd + 3 * a);
+        gagen_td_velocity_by_q(&t, a, pos, pd + 3 * a, dV, dvp + 3 * a);
+        gagen_td_cross(t.Vp + 6 * a, t.S + 6 * a, Xk + 6 * a);
+    }
+    for (a = 0; a < t.m; ++a) {  /* the column of coordinate k = cols[a] */
+        const double *Sk = t.S + 6 * a, *Xa = Xk + 6 * a;
+        const int k = t.cols[a];
+        for (b = 0; b < t.m; ++b) {  /* by coordinate cols[b] */
+            const double *Si = t.S + 6 * b;
+            double byq[6] = {0.0}, byqd[6] = {0.0}, z[6], w[6], u[6], dX[6];
+            if (t.level[b] <= t.level[a]) {
+                gagen_td_cross(Si, Sk, z);  /* dS_k */
+                gagen_td_at(z, pos, byqd);
+                for (i = 0; i < 3; ++i) byqd[3 + i] = z[3 + i];
+                gagen_td_cross(Si, Xa, w);  /* dX_k */
+                gagen_td_cross(Si, t.Vm + 6 * b, u);
+                gagen_td_cross(u, Sk, dX);
+                for (i = 0; i < 6; ++i) dX[i] = w[i] - dX[i];
+                gagen_td_at(dX, pos, byq);
+                for (i = 0; i < 3; ++i) byq[3 + i] = dX[3 + i];
+                gagen_cross_add(z + 3, vp, 1.0, byq);
+            }
+            gagen_cross_add(Sk + 3, pd + 3 * b, 1.0, byqd);
+            gagen_cross_add(Xa + 3, pd + 3 * b, 1.0, byq);
+            gagen_cross_add(Sk + 3, dvp + 3 * b, 1.0, byq);
+            for (i = 0; i < 6; ++i) {
+                const long at = ((long)GAGEN_FR_NV * i + k) * GAGEN_FR_NV + t.cols[b];
+                ddJ_dq[at] = byq[i];
+                ddJ_dqd[at] = byqd[i];
+            }
+        }
+    }
+    return 0;
+}
+
+/* ---------------------------------------------------------------------------------------
+ * The Coriolis matrix's derivative by q (along the velocity directions). C is Pinocchio's
+ * (gagen.symbolic.rnea_derivatives): over the moving bodies, in world axes at the world's
+ * origin, with per body t its spatial inertia I_t (from the regressor's parameters pi and
+ * the placements), velocity v_t, inertia rate Ydot_t = v_t x* I_t - I_t v_t x and momentum
+ * I_t v_t, summed over subtrees into Y, Ydot, H; per column c (of body t) S_c,
+ * Sdot_c = v_t x S_c, G_c = Y Sdot_c + (Ydot S_c + S_c x* H) / 2, u_c = Y S_c,
+ * w_c = Ydot S_c - S_c x* H:
+ *   C_rc = S_r . G_c                          (r's body an ancestor of c's, or c's)
+ *   C_cr = Sdot_r . u_c + S_r . w_c / 2       (r's body strictly above c's)
+ * Differentiated by q_k in forward mode: moving q_k moves the subtree of k's body rigidly,
+ * so there dS = S_k x S, dI = S_k x* I - I S_k x, dv = S_k x (v - v_p) (v_p: the velocity
+ * of k's body's parent), and nothing else moves; every other derivative follows by the
+ * product rule. O(n K) 6 x 6 products: C has no kernel of M's second derivatives.
+ * ------------------------------------------------------------------------------------- */
+#define GAGEN_CD_NK 3
+#define GAGEN_CD_NK1 3
+/* per moving body (parents first): its body, its moving parent (-1: none), its kind */
+static const int gagen_cd_body[GAGEN_CD_NK1] = { 0, 1, 2 };
+static const int gagen_cd_parent[GAGEN_CD_NK1] = { -1, 0, 1 };
+
+/* X = the motion cross product's matrix of v: X m = v x m */
+static void gagen_cd_crm(const double *v, double *X)
+{
+    int i;
+    for (i = 0; i < 36; ++i) X[i] = 0.0;
+    for (i = 0; i < 2; ++i) {
+        const double *w = v + 3;
+        const int o = 21 * i;  /* the diagonal blocks at (0, 0) and (3, 3) */
+        X[o + 1] = -w[2]; X[o + 2] = w[1];
+        X[o + 6] = w[2]; X[o + 8] = -w[0];
+        X[o + 12] = -w[1]; X[o + 13] = w[0];
+    }
+    X[4] = -v[2]; X[5] = v[1];
+    X[9] = v[2]; X[11] = -v[0];
+    X[15] = -v[1]; X[16] = v[0];
+}
+
+/* out (+)= v x* I - I v x (the rate of an inertia I moving with velocity v): -X^T I - I X */
+static void gagen_cd_rate(const double *v, const double *I, int add, double *out)
+{
+    double X[36];
+    int i, j, l;
+    gagen_cd_crm(v, X);
+    for (i = 0; i < 6; ++i)
+        for (j = 0; j < 6; ++j) {
+            double s = 0.0;
+            for (l = 0; l < 6; ++l) s -= X[6 * l + i] * I[6 * l + j] + I[6 * i + l] * X[6 * l + j];
+            out[6 * i + j] = add ? out[6 * i + j] + s : s;
+        }
+}
+
+/* y (+)= A x, A 6 x 6 */
+static void gagen_cd_apply(const double *A, const double *x, double k, double *y)
+{
+    int i, l;
+    for (i = 0; i < 6; ++i) {
+        double s = 0.0;
+        for (l = 0; l < 6; ++l) s += A[6 * i + l] * x[l];
+        y[i] += k * s;
+    }
+}
+
+/* y += k (v x* f): forces are (force, moment about the origin) */
+static void gagen_cd_fcross(const double *v, const double *f, double k, double *y)
+{
+    gagen_cross_add(v + 3, f, k, y);
+    gagen_cross_add(v + 3, f + 3, k, y + 3);
+    gagen_cross_add(v, f, k, y + 3);
+}
+
+static double gagen_cd_dot(const double *a, const double *b)
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5];
+}
+
+/* body t's spatial inertia at the world's origin, (force, moment) of a motion (v, w):
+ * [[m E, -[c]], [[c], I_0]] with c = m o + R mc its first moment, I_0 its inertia */
+static void gagen_cd_inertia(const double *X, const double *pi, int t, double *I)
+{
+    const double *R = X + 15 * gagen_cd_body[t], *o = R + 9, *P = pi + 10 * t;
+    const double m = P[0];
+    double h[3], c[3], Io[9], A[9], B[9];
+    /* pi's inertia about the origin in the body's axes: xx, xy, yy, xz, yz, zz */
+    const double Ib[9] = {P[4], P[5], P[7], P[5], P[6], P[8], P[7], P[8], P[9]};
+    int i, j, l;
+    for (i = 0; i < 3; ++i) h[i] = R[3 * i] * P[1] + R[3 * i + 1] * P[2] + R[3 * i + 2] * P[3];
+    for (i = 0; i < 9; ++i) A[i] = 0.0;
+    for (i = 0; i < 3; ++i)
+        for (j = 0; j < 3; ++j)
+            for (l = 0; l < 3; ++l) A[3 * i + j] += R[3 * i + l] * Ib[3 * l + j];
+    for (i = 0; i < 3; ++i)
+        for (j = 0; j < 3; ++j) {
+            double s = 0.0;
+            for (l = 0; l < 3; ++l) s += A[3 * i + l] * R[3 * j + l];
+            Io[3 * i + j] = s;
+        }
+    /* about the world's origin: I_0 = I_o - m [o][o] - [o][h] - [h][o] */
+    for (i = 0; i < 3; ++i)
+        for (j = 0; j < 3; ++j) {
+            const double e = i == j ? 1.0 : 0.0;
+            /* [a][b] = b a^T - (a . b) E */
+            const double oo = o[j] * o[i] - (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]) * e;
+            const double oh = h[j] * o[i] - (o[0] * h[0] + o[1] * h[1] + o[2] * h[2]) * e;
+            const double ho = o[j] * h[i] - (o[0] * h[0] + o[1] * h[1] + o[2] * h[2]) * e;
+            B[3 * i + j] = Io[3 * i + j] - m * oo - oh - ho;
+        }
+    for (i = 0; i < 3; ++i) c[i] = m * o[i] + h[i];
+    for (i = 0; i < 36; ++i) I[i] = 0.0;
+    for (i = 0; i < 3; ++i) {
+        I[7 * i] = m;
+        for (j = 0; j < 3; ++j) I[6 * (3 + i) + 3 + j] = B[3 * i + j];
+    }
+    /* -[c] at (0, 3), [c] at (3, 0) */
+    I[4] = c[2]; I[5] = -c[1]; I[9] = -c[2]; I[11] = c[0]; I[15] = c[1]; I[16] = -c[0];
+    I[19] = -c[2]; I[20] = c[1]; I[24] = c[2]; I[26] = -c[0]; I[30] = -c[1]; I[31] = c[0];
+}
+
+int rrr_coriolis_matrix_derivatives(const double *q, const double *qd,
+                                            const double *p, double *C, double *dC_dq)
+{
+    enum { K = GAGEN_CD_NK1, N = GAGEN_FR_NV };
+    double X[15 * GAGEN_FR_NB], pi[39];
+    double I[36 * K], Yd[36 * K], v[6 * K], Y[36 * K], Ydc[36 * K], H[6 * K];
+    double dI[36 * K], dY[36 * K], dYdc[36 * K], dv[6 * K], dH[6 * K];
+    double S[6 * N], Sd[6 * N], G[6 * N], U[6 * N], W[6 * N];
+    int body[N], count[K], t, c, r, k, i;
+    char above[K * K];  /* above[a K + b]: a is b or one of its ancestors */
+    rrr_placements(q, p, X);
+    rrr_regressor_parameters(p, pi);
+    for (t = 0; t < K * K; ++t) above[t] = 0;
+    /* the forward pass: inertias, columns, velocities, rates */
+    for (t = 0, c = 0; t < GAGEN_CD_NK; ++t) {
+        const int b = gagen_cd_body[t], kind = gagen_kind[b], parent = gagen_cd_parent[t];
+        const double *Rb = X + 15 * b, *o = Rb + 9, *axis = Rb + 12;
+        for (r = t; r >= 0; r = gagen_cd_parent[r]) above[r * K + t] = 1;
+        gagen_cd_inertia(X, pi, t, I + 36 * t);
+        c = gagen_column[b];
+        count[t] = kind == 3 ? 6 : 1;
+        for (i = 0; i < 6; ++i) v[6 * t + i] = parent >= 0 ? v[6 * parent + i] : 0.0;
+        for (k = 0; k < count[t]; ++k, ++c) {
+            double *s = S + 6 * c;
+            const int slides = kind == 2 || (kind == 3 && k < 3);
+            for (i = 0; i < 3; ++i) {
+                const double e = kind == 3 ? Rb[3 * i + k % 3] : axis[i];
+                s[i] = slides ? e : 0.0;
+                s[3 + i] = slides ? 0.0 : e;
+            }
+            if (!slides) gagen_cross(o, s + 3, s);
+            body[c] = t;
+            for (i = 0; i < 6; ++i) v[6 * t + i] += s[i] * qd[c];
+        }
+        gagen_cd_rate(v + 6 * t, I + 36 * t, 0, Yd + 36 * t);
+        for (i = 0; i < 6; ++i) H[6 * t + i] = 0.0;
+        gagen_cd_apply(I + 36 * t, v + 6 * t, 1.0, H + 6 * t);
+        for (i = 0; i < 36; ++i) {
+            Y[36 * t + i] = I[36 * t + i];
+            Ydc[36 * t + i] = Yd[36 * t + i];
+        }
+    }
+    for (c = 0; c < N; ++c) gagen_td_cross(v + 6 * body[c], S + 6 * c, Sd + 6 * c);
+    /* the subtrees' sums, children before parents */
+    for (t = GAGEN_CD_NK - 1; t >= 0; --t) {
+        const int parent = gagen_cd_parent[t];
+        if (parent < 0) continue;
+        for (i = 0; i < 36; ++i) {
+            Y[36 * parent + i] += Y[36 * t + i];
+            Ydc[36 * parent + i] += Ydc[36 * t + i];
+        }
+        for (i = 0; i < 6; ++i) H[6 * parent + i] += H[6 * t + i];
+    }
+    for (c = 0; c < N; ++c) {
+        const int t = body[c];
+        const double *s = S + 6 * c;
+        double *g = G + 6 * c, *u = U + 6 * c, *w = W + 6 * c;
+        for (i = 0; i < 6; ++i) g[i] = u[i] = w[i] = 0.0;
+        gagen_cd_apply(Y + 36 * t, Sd + 6 * c, 1.0, g);
+        gagen_cd_apply(Ydc + 36 * t, s, 0.5, g);
+        gagen_cd_fcross(s, H + 6 * t, 0.5, g);
+        gagen_cd_apply(Y + 36 * t, s, 1.0, u);
+        gagen_cd_apply(Ydc + 36 * t, s, 1.0, w);
+        gagen_cd_fcross(s, H + 6 * t, -1.0, w);
+    }
+    if (C != NULL) {
+        for (i = 0; i < N * N; ++i) C[i] = 0.0;
+        for (c = 0; c < N; ++c)
+            for (r = 0; r < N; ++r) {
+                if (!above[body[r] * K + body[c]]) continue;
+                C[N * r + c] = gagen_cd_dot(S + 6 * r, G + 6 * c);
+                if (body[r] != body[c])
+                    C[N * c + r] = gagen_cd_dot(Sd + 6 * r, U + 6 * c)
+                                   + 0.5 * gagen_cd_dot(S + 6 * r, W + 6 * c);
+            }
+    }
+    if (dC_dq == NULL) return 0;
+    for (i = 0; i < N * N * N; ++i) dC_dq[i] = 0.0;
+    /* forward mode along each velocity direction k */
+    for (k = 0; k < N; ++k) {
+        const int tk = body[k], pk = gagen_cd_parent[tk];
+        const double *sk = S + 6 * k;
+        double dS[6 * N], dSd[6 * N], dG[6 * N], dU[6 * N], dW[6 * N];
+        for (t = 0; t < GAGEN_CD_NK; ++t) {
+            double rel[6];
+            for (i = 0; i < 36; ++i) dI[36 * t + i] = dY[36 * t + i] = dYdc[36 * t + i] = 0.0;
+            for (i = 0; i < 6; ++i) dv[6 * t + i] = dH[6 * t + i] = 0.0;
+            if (!above[tk * K + t]) continue;
+            for (i = 0; i < 6; ++i) rel[i] = v[6 * t + i] - (pk >= 0 ? v[6 * pk + i] : 0.0);
+            gagen_td_cross(sk, rel, dv + 6 * t);
+            gagen_cd_rate(sk, I + 36 * t, 0, dI + 36 * t);
+            gagen_cd_rate(dv + 6 * t, I + 36 * t, 0, dYdc + 36 * t);
+            gagen_cd_rate(v + 6 * t, dI + 36 * t, 1, dYdc + 36 * t);
+            gagen_cd_apply(dI + 36 * t, v + 6 * t, 1.0, dH + 6 * t);
+            gagen_cd_apply(I + 36 * t, dv + 6 * t, 1.0, dH + 6 * t);
+            for (i = 0; i < 36; ++i) dY[36 * t + i] = dI[36 * t + i];
+        }
+        for (t = GAGEN_CD_NK - 1; t >= 0; --t) {
+            const int parent = gagen_cd_parent[t];
+            /* only k's subtree and, through the sums, its ancestors change */
+            if (parent < 0 || !(above[tk * K + t] || above[t * K + tk])) continue;
+            for (i = 0; i < 36; ++i) {
+                dY[36 * parent + i] += dY[36 * t + i];
+                dYdc[36 * parent + i] += dYdc[36 * t + i];
+            }
+            for (i = 0; i < 6; ++i) dH[6 * parent + i] += dH[6 * t + i];
+        }
+        for (c = 0; c < N; ++c) {
+            const int t = body[c];
+            const double *s = S + 6 * c, *sd = Sd + 6 * c;
+            double *ds = dS + 6 * c, *dsd = dSd + 6 * c, tmp[6];
+            double *g = dG + 6 * c, *u = dU + 6 * c, *w = dW + 6 * c;
+            for (i = 0; i < 6; ++i) ds[i] = 0.0;
+            if (above[tk * K + t]) gagen_td_cross(sk, s, ds);
+            gagen_td_cross(dv + 6 * t, s, dsd);
+            gagen_td_cross(v + 6 * t, ds, tmp);
+            for (i = 0; i < 6; ++i) {
+                dsd[i] += tmp[i];
+                g[i] = u[i] = w[i] = 0.0;
+            }
+            gagen_cd_apply(dY + 36 * t, sd, 1.0, g);
+            gagen_cd_apply(Y + 36 * t, dsd, 1.0, g);
+            gagen_cd_apply(dYdc + 36 * t, s, 0.5, g);
+            gagen_cd_apply(Ydc + 36 * t, ds, 0.5, g);
+            gagen_cd_fcross(ds, H + 6 * t, 0.5, g);
+            gagen_cd_fcross(s, dH + 6 * t, 0.5, g);
+            gagen_cd_apply(dY + 36 * t, s, 1.0, u);
+            gagen_cd_apply(Y + 36 * t, ds, 1.0, u);
+            gagen_cd_apply(dYdc + 36 * t, s, 1.0, w);
+            gagen_cd_apply(Ydc + 36 * t, ds, 1.0, w);
+            gagen_cd_fcross(ds, H + 6 * t, -1.0, w);
+            gagen_cd_fcross(s, dH + 6 * t, -1.0, w);
+        }
+        for (c = 0; c < N; ++c)
+            for (r = 0; r < N; ++r) {
+                if (!above[body[r] * K + body[c]]) continue;
+                dC_dq[(long)(N * r + c) * N + k] = gagen_cd_dot(dS + 6 * r, G + 6 * c)
+                                                   + gagen_cd_dot(S + 6 * r, dG + 6 * c);
+                if (body[r] != body[c])
+                    dC_dq[(long)(N * c + r) * N + k] =
+                        gagen_cd_dot(dSd + 6 * r, U + 6 * c) + gagen_cd_dot(Sd + 6 * r, dU + 6 * c)
+                        + 0.5 * (gagen_cd_dot(dS + 6 * r, W + 6 * c)
+                                 + gagen_cd_dot(S + 6 * r, dW + 6 * c));
+            }
+    }
+    return 0;
+}
+
+/* ---------------------------------------------------------------------------------------
  * Constraints: contacts (a frame held in the world) and closed loops (two frames held
  * together), as declared when the model was built; the constrained forward dynamics and the
  * impulse dynamics by the KKT system through M = L^T D L and the Delassus matrix of the

@@ -145,6 +145,21 @@ int rrr_frame_bias_acceleration(const double *q, const double *qd, const double 
 int rrr_frame_jacobian_time_variation(const double *q, const double *qd,
                                               const double *p, int frame, int reference,
                                               double *dJ);
+/* Their derivatives (LOCAL_WORLD_ALIGNED, the classical acceleration), by q along the
+ * velocity directions (as the dynamics derivatives) and by qd: da_dq, da_dqd 6 x 3
+ * (row-major; qdd NULL: 0, the bias acceleration's; by qdd it is the frame Jacobian);
+ * ddJ_dq, ddJ_dqd (6 3) x 3: row r 3 + k holds dJ[r][k]'s derivatives. */
+int rrr_frame_acceleration_derivatives(const double *q, const double *qd,
+                                               const double *qdd, const double *p, int frame,
+                                               double *da_dq, double *da_dqd);
+int rrr_frame_jacobian_time_variation_derivatives(const double *q, const double *qd,
+                                                          const double *p, int frame,
+                                                          double *ddJ_dq, double *ddJ_dqd);
+/* The rigid-body Coriolis matrix C (as the derivative module's coriolis_matrix; NULL: not
+ * written) and dC_dq ((3 3) x 3, row i 3 + j holds dC_ij's derivatives along the
+ * velocity directions; NULL: not computed). Returns 0. */
+int rrr_coriolis_matrix_derivatives(const double *q, const double *qd,
+                                            const double *p, double *C, double *dC_dq);
 /* For the rows m = dims * count (dims 6, or 3: linear rows only) of count frames' stacked
  * LOCAL_WORLD_ALIGNED Jacobians J: G = J M^-1 J^T (m x m) and Lambda = G^-1 (m x m), from
  * M = L^T D L (M is never inverted). work holds m x 3 doubles. They return 0,
