@@ -1,15 +1,17 @@
-"""The task-space functions' analytic derivatives (issue 28): the model's C kernels
-`<model>_frame_acceleration_derivatives` and `<model>_frame_jacobian_time_variation_derivatives`
-(LOCAL_WORLD_ALIGNED, the classical acceleration; by q along the velocity directions), and
-the CasADi functions whose Jacobians they are, with the Delassus matrix's (from dJ and the
-inverse-dynamics derivatives' dM).
+"""The task-space functions' and the Coriolis matrix's analytic derivatives (issue 28): the
+model's C kernels `<model>_frame_acceleration_derivatives`,
+`_frame_jacobian_time_variation_derivatives` (LOCAL_WORLD_ALIGNED, the classical
+acceleration), `_delassus_derivatives` and `_coriolis_matrix_derivatives` (by q along the
+velocity directions), and the CasADi functions whose Jacobians they are.
 
 On the paper's robot, the Panda (fixed, prismatic fingers) and ANYmal C (floating): the
 kernels against Pinocchio's getFrameAccelerationDerivatives (1e-9) and against five-point
 central differences of gagen's own task-space functions (1e-6); J's time variation by qd
 against dJ/dq, and contracted with qd against the bias acceleration's derivatives (defining
-identities); CasADi's jacobian() equal to the kernels (1e-12); the Delassus matrix's against
-its formula assembled from Pinocchio's RNEA derivatives (1e-9)."""
+identities); the Delassus matrix's (`<model>_delassus_derivatives`) against its formula
+assembled from Pinocchio's RNEA derivatives (1e-9); the Coriolis matrix's
+(`<model>_coriolis_matrix_derivatives`) against central differences and Mdot = C + C^T
+differentiated; CasADi's jacobian() equal to the kernels (1e-12)."""
 
 from __future__ import annotations
 
@@ -72,6 +74,8 @@ class Robot:
         self._dj.argtypes = [double_p, double_p, double_p, ctypes.c_int, double_p, double_p]
         self._dc = getattr(lib, f"{ident}_coriolis_matrix_derivatives")
         self._dc.argtypes = [double_p, double_p, double_p, ctypes.c_void_p, double_p]
+        self._dg = getattr(lib, f"{ident}_delassus_derivatives")
+        self._dg.argtypes = [double_p, double_p, ctypes.c_int, double_p, double_p]
         self.p = dyn.parameter_vector()
         # the frames checked: every one of a small model, a spread and the feet otherwise
         frames = dyn.frames
@@ -107,6 +111,13 @@ class Robot:
         out = np.empty((n, n, n))
         assert self._dc(q, qd, self.p, None, out) == 0
         return out
+
+
+    def delassus_derivatives(self, q, frame: str):
+        """(G, dG/dq): (6, 6) and (6, 6, nv), [a, b, k] = d G_ab / dq_k."""
+        G, dG = np.empty((6, 6)), np.empty((6, 6, self.dyn.nv))
+        assert self._dg(q, self.p, self.dyn.frames.index(frame), G, dG) == 0
+        return G, dG
 
 
 @functools.cache
@@ -293,17 +304,20 @@ def test_casadi_jacobians_are_the_kernels(casadi_robot):
             return D.transpose(1, 0, 2).reshape(6 * dyn.nv, dyn.nv)
         close(tv["q"] @ G, casadi_order(by_q), f"{frame} J̇ by q", TIGHT)
         close(tv["qd"], casadi_order(by_qd), f"{frame} J̇ by qd", TIGHT)
+        dG = casadi_jacobians(robot.fns["delassus"], q, qd, qdd, number)["q"] @ G
+        # CasADi's rows are G's entries column-major: b 6 + a
+        close(dG.reshape(6, 6, dyn.nv).transpose(1, 0, 2),
+              robot.delassus_derivatives(q, frame)[1], f"{frame} delassus by q", TIGHT)
 
 
-def test_delassus_jacobian_matches_its_formula_on_pinocchio_s_terms(casadi_robot):
-    """dG/dq = dJ Y + Y^T dJ^T - Y^T dM Y (Y = M^-1 J^T), with dM y from Pinocchio's RNEA
-    derivatives at (q, 0, y) less those at (q, 0, 0), and dJ column by column from Pinocchio's
-    frame velocity derivatives at qd = e_i (d(J e_i)/dq)."""
-    robot = casadi_robot
+def test_delassus_derivative_matches_its_formula_on_pinocchio_s_terms(robot):
+    """<model>_delassus_derivatives: G as delassus gives it, and dG/dq = dJ Y + Y^T dJ^T
+    - Y^T dM Y (Y = M^-1 J^T), with dM y from Pinocchio's RNEA derivatives at (q, 0, y)
+    less those at (q, 0, 0) and dJ column by column from Pinocchio's frame velocity
+    derivatives at qd = e_i (d(J e_i)/dq); and against central differences."""
     dyn, twin = robot.dyn, robot.twin
     m, d = twin.model, twin.data
     q, _, _ = random_state(dyn, np.random.default_rng(9))
-    G = tangent_map(dyn, q)
     zero = np.zeros(dyn.nv)
     qp = twin.q(q)
 
@@ -313,18 +327,18 @@ def test_delassus_jacobian_matches_its_formula_on_pinocchio_s_terms(casadi_robot
 
     gravity = dtau_dq(zero)
     M = dyn.mass_matrix(q)
-    for frame in robot.frames[:4]:
-        number = dyn.frames.index(frame)
+    for frame in robot.frames:
+        G, ours = robot.delassus_derivatives(q, frame)
+        close(G, dyn.delassus(q, [frame]), f"{frame} G", TIGHT)
         J = dyn.frame_jacobian(q, frame)
         Y = np.linalg.solve(M, J.T)
         dJ = pinocchio_jacobian_derivative(robot, q, frame)
         dMY = np.stack([dtau_dq(Y[:, b]) - gravity for b in range(6)], axis=1)  # (nv, 6, nv)
         expected = (np.einsum("aik,ib->abk", dJ, Y) + np.einsum("ia,bik->abk", Y, dJ)
                     - np.einsum("ia,ibk->abk", Y, dMY))
-        ours = casadi_jacobians(robot.fns["delassus"], q, zero, zero, number)["q"] @ G
-        # CasADi's rows are G's entries column-major: b 6 + a
-        close(ours.reshape(6, 6, dyn.nv).transpose(1, 0, 2), expected, f"{frame} dG/dq",
-              PINOCCHIO)
+        close(ours, expected, f"{frame} dG/dq", PINOCCHIO)
+        close(ours, tangent_differences(lambda x, f=frame: dyn.delassus(x, [f]), dyn, q),
+              f"{frame} dG/dq (differences)", DIFFERENCES)
 
 
 # ------------------------------------------------------------------ the Coriolis matrix

@@ -20,8 +20,8 @@ Which derivatives are analytic (gagen.casadi.table has the details):
   the model's task-space derivative kernels (<model>_frame_acceleration_derivatives,
   <model>_frame_jacobian_time_variation_derivatives: spatial algebra on the frame's path),
   by qdd the frame Jacobian;
-- delassus: dG = dJ Y + Y^T dJ^T - Y^T dM Y (Y = M^-1 J^T), dJ from the frame Jacobian and
-  dM y from inverse_dynamics_derivatives;
+- delassus: dG = dJ Y + Y^T dJ^T - Y^T dM Y (Y = M^-1 J^T), the model's kernel
+  <model>_delassus_derivatives;
 - coriolis_matrix: exact by qd (C is linear in qd); by q the model's kernel
   <model>_coriolis_matrix_derivatives (Pinocchio's C in forward mode, spatial algebra);
 - by the parameters p (the `_p` functions, `parameters=True`): for inverse_dynamics,

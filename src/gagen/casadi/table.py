@@ -420,70 +420,12 @@ DELASSUS = Entry(
     outputs=(Port("G", 6, 6),),
     value="""double work[6 * NV];
     return {ident}_delassus(q, p, 1, &frame, 6, work, G);""",
-    # dG = dJ Y + Y^T dJ^T - Y^T dM Y with Y = M^-1 J^T: dJ from J's own columns
-    # (gc_jacobian_derivative), dM y_b = d(M y_b)/dq = dtau/dq at (q, 0, y_b) less at (q, 0, 0)
-    # (inverse_dynamics_derivatives: damping and friction vanish at qd = 0)
-    jacobian="""
-    double *J, *dJ, *L, *Y, *g, *dMy, *dqd;
-    int a, b, i, k, rc;
-    GC_TAKE(J, 6 * NV);
-    GC_TAKE(dJ, 6 * NV * NV);
-    GC_TAKE(L, NV * NV);
-    GC_TAKE(Y, 6 * NV);
-    GC_TAKE(g, NV * NV);
-    GC_TAKE(dMy, 6 * NV * NV);
-    GC_TAKE(dqd, NV * NV);
-    rc = {ident}_frame_jacobian(q, p, frame GC_LWA, J);
-    if (rc) return rc;
-    gc_jacobian_derivative(frame, J, dJ);
-    {ident}_mass_matrix(q, p, L);
-    for (k = 0; k < NV; ++k) {{  /* M = L L^T in place (lower); not positive definite: fail */
-        double d = L[k * NV + k];
-        for (i = 0; i < k; ++i) d -= L[k * NV + i] * L[k * NV + i];
-        if (!(d > 0.0)) return 1;
-        L[k * NV + k] = d = sqrt(d);
-        for (a = k + 1; a < NV; ++a) {{
-            double s = L[a * NV + k];
-            for (i = 0; i < k; ++i) s -= L[a * NV + i] * L[k * NV + i];
-            L[a * NV + k] = s / d;
-        }}
-    }}
-    for (a = 0; a < 6; ++a) {{  /* y_a = M^-1 (row a of J) */
-        double *y = Y + a * NV;
-        for (i = 0; i < NV; ++i) {{
-            double s = J[a * NV + i];
-            for (k = 0; k < i; ++k) s -= L[i * NV + k] * y[k];
-            y[i] = s / L[i * NV + i];
-        }}
-        for (i = NV - 1; i >= 0; --i) {{
-            double s = y[i];
-            for (k = i + 1; k < NV; ++k) s -= L[k * NV + i] * y[k];
-            y[i] = s / L[i * NV + i];
-        }}
-    }}
-    {ident}_inverse_dynamics_derivatives(q, gc_zeros, gc_zeros, p, g, dqd);
-    for (b = 0; b < 6; ++b) {{
-        double *d = dMy + (long)b * NV * NV;
-        {ident}_inverse_dynamics_derivatives(q, gc_zeros, Y + b * NV, p, d, dqd);
-        for (i = 0; i < NV * NV; ++i) d[i] -= g[i];
-    }}
-    for (a = 0; a < 6; ++a)
-        for (b = 0; b <= a; ++b)
-            for (k = 0; k < NV; ++k) {{
-                const double *ya = Y + a * NV, *yb = Y + b * NV;
-                const double *d = dMy + (long)b * NV * NV;
-                double s = 0.0;
-                for (i = 0; i < NV; ++i)
-                    s += dJ[(a * NV + i) * NV + k] * yb[i] + ya[i] * dJ[(b * NV + i) * NV + k]
-                         - ya[i] * d[i * NV + k];
-                D_G_q[(a * 6 + b) * NV + k] = D_G_q[(b * 6 + a) * NV + k] = s;
-            }}
-    return 0;""",
-    work=lambda s: 12 * s["nv"] + 15 * s["nv"] ** 2,
+    # dG = dJ Y + Y^T dJ^T - Y^T dM Y with Y = M^-1 J^T, in the model's C
+    jacobian="return {ident}_delassus_derivatives(q, p, frame, NULL, D_G_q);",
     per_frame=True,
-    requires=("delassus", "frame_jacobian", "mass_matrix", "inverse_dynamics_derivatives"),
+    requires=("delassus", "delassus_derivatives"),
     doc="G = delassus(q, frame) = J M^-1 J^T of the frame's LOCAL_WORLD_ALIGNED Jacobian "
-        "(M factorised, never inverted): dG from dJ and inverse_dynamics_derivatives' dM",
+        "(M factorised, never inverted): dG from delassus_derivatives",
 )
 
 # The table: the order of the dictionary gagen.casadi.functions returns.
