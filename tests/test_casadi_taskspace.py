@@ -73,7 +73,8 @@ class Robot:
         self._dj = getattr(lib, f"{ident}_frame_jacobian_time_variation_derivatives")
         self._dj.argtypes = [double_p, double_p, double_p, ctypes.c_int, double_p, double_p]
         self._dc = getattr(lib, f"{ident}_coriolis_matrix_derivatives")
-        self._dc.argtypes = [double_p, double_p, double_p, ctypes.c_void_p, double_p]
+        self._dc.argtypes = [double_p, double_p, double_p, ctypes.c_void_p, double_p,
+                             double_p]
         self._dg = getattr(lib, f"{ident}_delassus_derivatives")
         self._dg.argtypes = [double_p, double_p, ctypes.c_int, double_p, double_p]
         self.p = dyn.parameter_vector()
@@ -105,12 +106,13 @@ class Robot:
         return dq, dqd
 
 
-    def coriolis_derivatives(self, q, qd):
-        """dC/dq, (nv, nv, nv): [i, j, k] = d C_ij / dq_k along the velocity directions."""
+    def coriolis_derivatives(self, q, qd, by_qd: bool = False):
+        """dC/dq (or with by_qd dC/dqd), (nv, nv, nv): [i, j, k] = d C_ij / dq_k along the
+        velocity directions."""
         n = self.dyn.nv
-        out = np.empty((n, n, n))
-        assert self._dc(q, qd, self.p, None, out) == 0
-        return out
+        dq, dqd = np.empty((n, n, n)), np.empty((n, n, n))
+        assert self._dc(q, qd, self.p, None, dq, dqd) == 0
+        return dqd if by_qd else dq
 
 
     def delassus_derivatives(self, q, frame: str):
@@ -345,7 +347,8 @@ def test_delassus_derivative_matches_its_formula_on_pinocchio_s_terms(robot):
 
 def test_coriolis_derivative_matches_central_differences(robot):
     """<model>_coriolis_matrix_derivatives against five-point differences of gagen's
-    coriolis_matrix along the velocity directions (Pinocchio has no dC/dq)."""
+    coriolis_matrix along the velocity directions (Pinocchio has no dC/dq), and by qd
+    against C(q, e_k)."""
     dyn = robot.dyn
     rng = np.random.default_rng(10)
     for _ in range(2):
@@ -353,6 +356,10 @@ def test_coriolis_derivative_matches_central_differences(robot):
         close(robot.coriolis_derivatives(q, qd),
               tangent_differences(lambda x, qd=qd: dyn.coriolis_matrix(x, qd), dyn, q),
               "dC/dq", DIFFERENCES)
+        # C is linear in qd: dC/dqd_k = C(q, e_k)
+        close(robot.coriolis_derivatives(q, qd, by_qd=True),
+              np.stack([dyn.coriolis_matrix(q, e) for e in np.eye(dyn.nv)], axis=-1),
+              "dC/dqd", TIGHT)
 
 
 def test_coriolis_derivative_meets_mdot_identity(casadi_robot):
@@ -375,6 +382,8 @@ def test_coriolis_derivative_meets_mdot_identity(casadi_robot):
     dC = robot.coriolis_derivatives(q, qd)
     close(dC + dC.transpose(1, 0, 2), tangent_differences(mdot, dyn, q),
           "d(C + C^T)/dq = d Mdot/dq", DIFFERENCES)
-    by_q = casadi_jacobians(robot.fns["coriolis_matrix"], q, qd, qd, 0)["q"]
-    close(by_q @ tangent_map(dyn, q), dC.transpose(1, 0, 2).reshape(n * n, n),
+    blocks = casadi_jacobians(robot.fns["coriolis_matrix"], q, qd, qd, 0)
+    close(blocks["q"] @ tangent_map(dyn, q), dC.transpose(1, 0, 2).reshape(n * n, n),
           "CasADi's dC/dq", TIGHT)
+    close(blocks["qd"], robot.coriolis_derivatives(q, qd, by_qd=True).transpose(1, 0, 2)
+          .reshape(n * n, n), "CasADi's dC/dqd", TIGHT)

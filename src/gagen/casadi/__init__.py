@@ -22,8 +22,8 @@ Which derivatives are analytic (gagen.casadi.table has the details):
   by qdd the frame Jacobian;
 - delassus: dG = dJ Y + Y^T dJ^T - Y^T dM Y (Y = M^-1 J^T), the model's kernel
   <model>_delassus_derivatives;
-- coriolis_matrix: exact by qd (C is linear in qd); by q the model's kernel
-  <model>_coriolis_matrix_derivatives (Pinocchio's C in forward mode, spatial algebra);
+- coriolis_matrix: by q and qd the model's kernel <model>_coriolis_matrix_derivatives
+  (Pinocchio's C in forward mode, spatial algebra);
 - by the parameters p (the `_p` functions, `parameters=True`): for inverse_dynamics,
   forward_dynamics and gravity, the inertial parameters (masses, centres of mass,
   inertias, joint damping, friction, armature: those the regressor Y does not depend on)

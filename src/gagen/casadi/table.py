@@ -185,26 +185,12 @@ CORIOLIS_MATRIX = Entry(
     inputs=(_q(), _v("qd")),
     outputs=(Port("C", "nv", "nv"),),
     value="{ident}_coriolis_matrix(q, qd, p, C);\n    return 0;",
-    # C is linear in qd: dC/dqd_k = C(q, e_k), exact; dC/dq from the model's kernel
-    # coriolis_matrix_derivatives (Pinocchio's C differentiated in forward mode by spatial
-    # algebra: each coordinate moves its subtree rigidly)
-    jacobian="""
-    double *e, *Ck;
-    int i, k;
-    GC_TAKE(e, NV);
-    GC_TAKE(Ck, NV * NV);
-    for (k = 0; k < NV; ++k) e[k] = 0.0;
-    for (k = 0; k < NV; ++k) {{
-        e[k] = 1.0;
-        {ident}_coriolis_matrix(q, e, p, Ck);
-        e[k] = 0.0;
-        for (i = 0; i < NV * NV; ++i) D_C_qd[i * NV + k] = Ck[i];
-    }}
-    return {ident}_coriolis_matrix_derivatives(q, qd, p, NULL, D_C_q);""",
-    work=lambda s: s["nv"] + s["nv"] ** 2,
+    # by q and qd the model's kernel coriolis_matrix_derivatives (Pinocchio's C differentiated
+    # in forward mode by spatial algebra: each coordinate moves its subtree rigidly; by qd
+    # it is C(q, e_k), C being linear in qd)
+    jacobian="return {ident}_coriolis_matrix_derivatives(q, qd, p, NULL, D_C_q, D_C_qd);",
     requires=("coriolis_matrix", "coriolis_matrix_derivatives"),
-    doc="C = coriolis_matrix(q, qd): dC/dqd exact (C is linear in qd), dC/dq from "
-        "coriolis_matrix_derivatives",
+    doc="C = coriolis_matrix(q, qd): the Jacobian from coriolis_matrix_derivatives",
 )
 
 FRAME_PLACEMENT = Entry(
