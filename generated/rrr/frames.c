@@ -1134,7 +1134,7 @@ int rrr_frame_jacobian_time_variation_derivatives(const double *q, const double 
  * Differentiated by q_k in forward mode: moving q_k moves the subtree of k's body rigidly,
  * so there dS = S_k x S, dI = S_k x* I - I S_k x, dv = S_k x (v - v_p) (v_p: the velocity
  * of k's body's parent), and nothing else moves; every other derivative follows by the
- * product rule. O(n K) 6 x 6 products: C has no kernel of M's second derivatives.
+ * product rule, on the subtrees' sums (below): O(n^2) 6 x 6 matrix-vector products.
  * ------------------------------------------------------------------------------------- */
 #define GAGEN_CD_NK 3
 #define GAGEN_CD_NK1 3
@@ -1192,6 +1192,17 @@ static void gagen_cd_fcross(const double *v, const double *f, double k, double *
     gagen_cross_add(v, f, k, y + 3);
 }
 
+/* y += k (s x* (A x) - A (s x x)): the change of A x as the inertia-like A moves by s */
+static void gagen_cd_moved(const double *A, const double *s, const double *x, double k,
+                           double *y)
+{
+    double Ax[6] = {0.0}, sx[6];
+    gagen_cd_apply(A, x, 1.0, Ax);
+    gagen_cd_fcross(s, Ax, k, y);
+    gagen_td_cross(s, x, sx);
+    gagen_cd_apply(A, sx, -k, y);
+}
+
 static double gagen_cd_dot(const double *a, const double *b)
 {
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5];
@@ -1239,13 +1250,34 @@ static void gagen_cd_inertia(const double *X, const double *pi, int t, double *I
     I[19] = -c[2]; I[20] = c[1]; I[24] = c[2]; I[26] = -c[0]; I[30] = -c[1]; I[31] = c[0];
 }
 
+/* The motion columns (at the world's origin) of moving body t's coordinates into S (at
+ * their coordinates), body[c] = t for each; returns how many. */
+static int gagen_cd_columns(const double *X, int t, double *S, int *body)
+{
+    const int b = gagen_cd_body[t], kind = gagen_kind[b], count = kind == 3 ? 6 : 1;
+    const double *Rb = X + 15 * b, *o = Rb + 9, *axis = Rb + 12;
+    int k, i;
+    for (k = 0; k < count; ++k) {
+        double *s = S + 6 * (gagen_column[b] + k);
+        const int slides = kind == 2 || (kind == 3 && k < 3);
+        for (i = 0; i < 3; ++i) {
+            const double e = kind == 3 ? Rb[3 * i + k % 3] : axis[i];
+            s[i] = slides ? e : 0.0;
+            s[3 + i] = slides ? 0.0 : e;
+        }
+        if (!slides) gagen_cross(o, s + 3, s);
+        body[gagen_column[b] + k] = t;
+    }
+    return count;
+}
+
 int rrr_coriolis_matrix_derivatives(const double *q, const double *qd,
-                                            const double *p, double *C, double *dC_dq)
+                                            const double *p, double *C, double *dC_dq,
+                                            double *dC_dqd)
 {
     enum { K = GAGEN_CD_NK1, N = GAGEN_FR_NV };
     double X[15 * GAGEN_FR_NB], pi[39];
     double I[36 * K], Yd[36 * K], v[6 * K], Y[36 * K], Ydc[36 * K], H[6 * K];
-    double dI[36 * K], dY[36 * K], dYdc[36 * K], dv[6 * K], dH[6 * K];
     double S[6 * N], Sd[6 * N], G[6 * N], U[6 * N], W[6 * N];
     int body[N], count[K], t, c, r, k, i;
     char above[K * K];  /* above[a K + b]: a is b or one of its ancestors */
@@ -1254,25 +1286,13 @@ int rrr_coriolis_matrix_derivatives(const double *q, const double *qd,
     for (t = 0; t < K * K; ++t) above[t] = 0;
     /* the forward pass: inertias, columns, velocities, rates */
     for (t = 0, c = 0; t < GAGEN_CD_NK; ++t) {
-        const int b = gagen_cd_body[t], kind = gagen_kind[b], parent = gagen_cd_parent[t];
-        const double *Rb = X + 15 * b, *o = Rb + 9, *axis = Rb + 12;
+        const int b = gagen_cd_body[t], parent = gagen_cd_parent[t];
         for (r = t; r >= 0; r = gagen_cd_parent[r]) above[r * K + t] = 1;
         gagen_cd_inertia(X, pi, t, I + 36 * t);
-        c = gagen_column[b];
-        count[t] = kind == 3 ? 6 : 1;
         for (i = 0; i < 6; ++i) v[6 * t + i] = parent >= 0 ? v[6 * parent + i] : 0.0;
-        for (k = 0; k < count[t]; ++k, ++c) {
-            double *s = S + 6 * c;
-            const int slides = kind == 2 || (kind == 3 && k < 3);
-            for (i = 0; i < 3; ++i) {
-                const double e = kind == 3 ? Rb[3 * i + k % 3] : axis[i];
-                s[i] = slides ? e : 0.0;
-                s[3 + i] = slides ? 0.0 : e;
-            }
-            if (!slides) gagen_cross(o, s + 3, s);
-            body[c] = t;
-            for (i = 0; i < 6; ++i) v[6 * t + i] += s[i] * qd[c];
-        }
+        count[t] = gagen_cd_columns(X, t, S, body);
+        for (k = 0, c = gagen_column[b]; k < count[t]; ++k, ++c)
+            for (i = 0; i < 6; ++i) v[6 * t + i] += S[6 * c + i] * qd[c];
         gagen_cd_rate(v + 6 * t, I + 36 * t, 0, Yd + 36 * t);
         for (i = 0; i < 6; ++i) H[6 * t + i] = 0.0;
         gagen_cd_apply(I + 36 * t, v + 6 * t, 1.0, H + 6 * t);
@@ -1315,75 +1335,243 @@ int rrr_coriolis_matrix_derivatives(const double *q, const double *qd,
                                    + 0.5 * gagen_cd_dot(S + 6 * r, W + 6 * c);
             }
     }
+    if (dC_dqd != NULL) {
+        /* by qd_k (C is linear in qd): the velocities of k's subtree change by S_k, so
+         * dSdot = S_k x S there, dYdot = S_k's action on the moved part's sums, dH = Y_k S_k */
+        for (i = 0; i < N * N * N; ++i) dC_dqd[i] = 0.0;
+        for (k = 0; k < N; ++k) {
+            const int tk = body[k];
+            const double *sk = S + 6 * k;
+            double dG[6 * N], dW[6 * N], dSd[6 * N];
+            char related[N];
+            for (c = 0; c < N; ++c) {
+                const int t = body[c], moved = above[tk * K + t], src = moved ? t : tk;
+                const double *s = S + 6 * c;
+                double *g = dG + 6 * c, *w = dW + 6 * c, *dsd = dSd + 6 * c, dH[6] = {0.0};
+                related[c] = moved || above[t * K + tk];
+                for (i = 0; i < 6; ++i) g[i] = w[i] = dsd[i] = 0.0;
+                if (!related[c]) continue;
+                if (moved) {
+                    gagen_td_cross(sk, s, dsd);
+                    gagen_cd_apply(Y + 36 * t, dsd, 1.0, g);
+                }
+                gagen_cd_apply(Y + 36 * src, sk, 1.0, dH);
+                gagen_cd_moved(Y + 36 * src, sk, s, 1.0, w);
+                for (i = 0; i < 6; ++i) g[i] += 0.5 * w[i];
+                gagen_cd_fcross(s, dH, 0.5, g);
+                gagen_cd_fcross(s, dH, -1.0, w);
+            }
+            for (c = 0; c < N; ++c) {
+                if (!related[c]) continue;
+                for (r = 0; r < N; ++r) {
+                    if (!above[body[r] * K + body[c]]) continue;
+                    dC_dqd[(long)(N * r + c) * N + k] = gagen_cd_dot(S + 6 * r, dG + 6 * c);
+                    if (body[r] != body[c])
+                        dC_dqd[(long)(N * c + r) * N + k] =
+                            gagen_cd_dot(dSd + 6 * r, U + 6 * c)
+                            + 0.5 * gagen_cd_dot(S + 6 * r, dW + 6 * c);
+                }
+            }
+        }
+    }
     if (dC_dq == NULL) return 0;
     for (i = 0; i < N * N * N; ++i) dC_dq[i] = 0.0;
-    /* forward mode along each velocity direction k */
+    /* forward mode along each velocity direction k. Moving q_k moves k's subtree rigidly;
+     * with D = v_p x S_k (v_p: the velocity of k's body's parent), a column c that k moves
+     * keeps its products with the rows k moves but for what the rigid motion leaves (the
+     * Jacobi identity): dS = 0, dSdot = D x S, dY = 0, dYdot x = D x* (Y x) - Y (D x x),
+     * dH = Y D, so
+     *   dG = (Y (D x S) + D x* u + S x* (Y D)) / 2,   dw = D x* u - Y (D x S) - S x* (Y D),
+     * and a row r that k does not move adds the rigid motion's part, -(S_k x S_r) . G_c
+     * and the like. A column above k (k's subtree a part of its sums) takes the whole
+     * product rule on the moved part's sums Y_k, Ydot_k, H_k: dY x = S_k x* (Y_k x) -
+     * Y_k (S_k x x), dYdot x = the same of Ydot_k plus D x* (Y_k x) - Y_k (D x x),
+     * dH = S_k x* H_k + Y_k D. */
     for (k = 0; k < N; ++k) {
         const int tk = body[k], pk = gagen_cd_parent[tk];
         const double *sk = S + 6 * k;
-        double dS[6 * N], dSd[6 * N], dG[6 * N], dU[6 * N], dW[6 * N];
-        for (t = 0; t < GAGEN_CD_NK; ++t) {
-            double rel[6];
-            for (i = 0; i < 36; ++i) dI[36 * t + i] = dY[36 * t + i] = dYdc[36 * t + i] = 0.0;
-            for (i = 0; i < 6; ++i) dv[6 * t + i] = dH[6 * t + i] = 0.0;
-            if (!above[tk * K + t]) continue;
-            for (i = 0; i < 6; ++i) rel[i] = v[6 * t + i] - (pk >= 0 ? v[6 * pk + i] : 0.0);
-            gagen_td_cross(sk, rel, dv + 6 * t);
-            gagen_cd_rate(sk, I + 36 * t, 0, dI + 36 * t);
-            gagen_cd_rate(dv + 6 * t, I + 36 * t, 0, dYdc + 36 * t);
-            gagen_cd_rate(v + 6 * t, dI + 36 * t, 1, dYdc + 36 * t);
-            gagen_cd_apply(dI + 36 * t, v + 6 * t, 1.0, dH + 6 * t);
-            gagen_cd_apply(I + 36 * t, dv + 6 * t, 1.0, dH + 6 * t);
-            for (i = 0; i < 36; ++i) dY[36 * t + i] = dI[36 * t + i];
-        }
-        for (t = GAGEN_CD_NK - 1; t >= 0; --t) {
-            const int parent = gagen_cd_parent[t];
-            /* only k's subtree and, through the sums, its ancestors change */
-            if (parent < 0 || !(above[tk * K + t] || above[t * K + tk])) continue;
-            for (i = 0; i < 36; ++i) {
-                dY[36 * parent + i] += dY[36 * t + i];
-                dYdc[36 * parent + i] += dYdc[36 * t + i];
+        double dG[6 * N], dU[6 * N], dW[6 * N], ks[6 * N], ksd[6 * N], YD[6 * K];
+        double vp[6] = {0.0}, D[6];
+        char moved[N], related[N];
+        if (pk >= 0)
+            for (i = 0; i < 6; ++i) vp[i] = v[6 * pk + i];
+        gagen_td_cross(vp, sk, D);
+        for (t = 0; t < GAGEN_CD_NK; ++t)
+            if (above[tk * K + t]) {
+                for (i = 0; i < 6; ++i) YD[6 * t + i] = 0.0;
+                gagen_cd_apply(Y + 36 * t, D, 1.0, YD + 6 * t);
             }
-            for (i = 0; i < 6; ++i) dH[6 * parent + i] += dH[6 * t + i];
-        }
         for (c = 0; c < N; ++c) {
             const int t = body[c];
             const double *s = S + 6 * c, *sd = Sd + 6 * c;
-            double *ds = dS + 6 * c, *dsd = dSd + 6 * c, tmp[6];
             double *g = dG + 6 * c, *u = dU + 6 * c, *w = dW + 6 * c;
-            for (i = 0; i < 6; ++i) ds[i] = 0.0;
-            if (above[tk * K + t]) gagen_td_cross(sk, s, ds);
-            gagen_td_cross(dv + 6 * t, s, dsd);
-            gagen_td_cross(v + 6 * t, ds, tmp);
-            for (i = 0; i < 6; ++i) {
-                dsd[i] += tmp[i];
-                g[i] = u[i] = w[i] = 0.0;
+            moved[c] = above[tk * K + t];
+            related[c] = moved[c] || above[t * K + tk];
+            for (i = 0; i < 6; ++i) g[i] = u[i] = w[i] = 0.0;
+            if (moved[c]) {
+                double DS[6], a[6] = {0.0};
+                gagen_td_cross(D, s, DS);
+                gagen_cd_apply(Y + 36 * t, DS, 1.0, a);
+                for (i = 0; i < 6; ++i) {
+                    g[i] = 0.5 * a[i];
+                    w[i] = -a[i];
+                }
+                gagen_cd_fcross(D, U + 6 * c, 0.5, g);
+                gagen_cd_fcross(s, YD + 6 * t, 0.5, g);
+                gagen_cd_fcross(D, U + 6 * c, 1.0, w);
+                gagen_cd_fcross(s, YD + 6 * t, -1.0, w);
+                continue;
             }
-            gagen_cd_apply(dY + 36 * t, sd, 1.0, g);
-            gagen_cd_apply(Y + 36 * t, dsd, 1.0, g);
-            gagen_cd_apply(dYdc + 36 * t, s, 0.5, g);
-            gagen_cd_apply(Ydc + 36 * t, ds, 0.5, g);
-            gagen_cd_fcross(ds, H + 6 * t, 0.5, g);
-            gagen_cd_fcross(s, dH + 6 * t, 0.5, g);
-            gagen_cd_apply(dY + 36 * t, s, 1.0, u);
-            gagen_cd_apply(Y + 36 * t, ds, 1.0, u);
-            gagen_cd_apply(dYdc + 36 * t, s, 1.0, w);
-            gagen_cd_apply(Ydc + 36 * t, ds, 1.0, w);
-            gagen_cd_fcross(ds, H + 6 * t, -1.0, w);
-            gagen_cd_fcross(s, dH + 6 * t, -1.0, w);
+            gagen_td_cross(sk, s, ks + 6 * c);  /* a row k does not move */
+            gagen_td_cross(sk, sd, ksd + 6 * c);
+            if (related[c]) {  /* c's body above k's: the sums change */
+                const double *Yk = Y + 36 * tk, *Ydk = Ydc + 36 * tk, *Hk = H + 6 * tk;
+                double dH[6] = {0.0}, dYds[6] = {0.0};
+                gagen_cd_fcross(sk, Hk, 1.0, dH);
+                gagen_cd_apply(Yk, D, 1.0, dH);
+                gagen_cd_moved(Ydk, sk, s, 1.0, dYds);
+                gagen_cd_moved(Yk, D, s, 1.0, dYds);
+                gagen_cd_moved(Yk, sk, sd, 1.0, g);
+                gagen_cd_moved(Yk, sk, s, 1.0, u);
+                for (i = 0; i < 6; ++i) {
+                    g[i] += 0.5 * dYds[i];
+                    w[i] = dYds[i];
+                }
+                gagen_cd_fcross(s, dH, 0.5, g);
+                gagen_cd_fcross(s, dH, -1.0, w);
+            }
         }
-        for (c = 0; c < N; ++c)
+        for (c = 0; c < N; ++c) {
+            if (!related[c]) continue;
             for (r = 0; r < N; ++r) {
+                const double *sr = S + 6 * r;
+                double e;
                 if (!above[body[r] * K + body[c]]) continue;
-                dC_dq[(long)(N * r + c) * N + k] = gagen_cd_dot(dS + 6 * r, G + 6 * c)
-                                                   + gagen_cd_dot(S + 6 * r, dG + 6 * c);
-                if (body[r] != body[c])
-                    dC_dq[(long)(N * c + r) * N + k] =
-                        gagen_cd_dot(dSd + 6 * r, U + 6 * c) + gagen_cd_dot(Sd + 6 * r, dU + 6 * c)
-                        + 0.5 * (gagen_cd_dot(dS + 6 * r, W + 6 * c)
-                                 + gagen_cd_dot(S + 6 * r, dW + 6 * c));
+                e = gagen_cd_dot(sr, dG + 6 * c);
+                if (moved[c] && !moved[r]) e -= gagen_cd_dot(ks + 6 * r, G + 6 * c);
+                dC_dq[(long)(N * r + c) * N + k] = e;
+                if (body[r] == body[c]) continue;
+                if (!moved[c]) {
+                    e = gagen_cd_dot(Sd + 6 * r, dU + 6 * c)
+                        + 0.5 * gagen_cd_dot(sr, dW + 6 * c);
+                } else if (moved[r]) {
+                    double DS[6];
+                    gagen_td_cross(D, sr, DS);
+                    e = gagen_cd_dot(DS, U + 6 * c) + 0.5 * gagen_cd_dot(sr, dW + 6 * c);
+                } else {
+                    e = -gagen_cd_dot(ksd + 6 * r, U + 6 * c)
+                        + 0.5 * (gagen_cd_dot(sr, dW + 6 * c) - gagen_cd_dot(ks + 6 * r, W + 6 * c));
+                }
+                dC_dq[(long)(N * c + r) * N + k] = e;
             }
+        }
     }
+    return 0;
+}
+
+/* ---------------------------------------------------------------------------------------
+ * The Delassus matrix G = J M^-1 J^T of one frame (6 x 6, LOCAL_WORLD_ALIGNED) and its
+ * derivative by q: dG = dJ Y + Y^T dJ^T - Y^T dM Y with Y = M^-1 J^T (M = L^T D L along the
+ * tree, never inverted). J's columns change as J's own columns say (coordinate k turns the
+ * columns of the joints it carries, [w_k x J_j], and moves the frame's point for those above
+ * it, [w_j x v_k; 0]); y_a^T M y_b = sum over bodies V(y_a) . I V(y_b) changes by
+ *   d(y_a^T M y_b)/dq_k = -(S_k x V_p(y_a)) . H_k(y_b) - (S_k x V_p(y_b)) . H_k(y_a)
+ * (V_p: the velocity of k's body's parent at the rates y, H_k: the momentum of k's
+ * subtree; the rigid motion of the subtree cancels), O(K) per column of Y.
+ * ------------------------------------------------------------------------------------- */
+int rrr_delassus_derivatives(const double *q, const double *p, int frame, double *G,
+                                    double *dG_dq)
+{
+    enum { K = GAGEN_CD_NK1, N = GAGEN_FR_NV };
+    double X[15 * GAGEN_FR_NB], pi[39], M[N * N], J[6 * N], Yv[6 * N];
+    double S[6 * N], I[36 * K], V[36 * K], H[36 * K], R[9], pos[3], Fk[12];
+    double col[6 * N];
+    int body[N], depth[K], level[N], cols[N], m, t, a, b, c, j, k, i, rc;
+    if (frame < 0 || frame >= GAGEN_FR_NF) return GAGEN_ERR_BAD_ARG;
+    rrr_placements(q, p, X);
+    rrr_regressor_parameters(p, pi);
+    rrr_mass_matrix(q, p, M);
+    rc = gagen_ltdl(M);
+    if (rc != 0) return rc;
+    gagen_frame_offset(p, frame, Fk);
+    gagen_frame_pose(X, Fk, frame, R, pos);
+    for (i = 0; i < 6 * N; ++i) J[i] = 0.0;
+    m = gagen_frame_columns(X, frame, pos, col, cols);
+    for (c = 0; c < m; ++c)
+        for (i = 0; i < 6; ++i) J[N * i + cols[c]] = col[6 * c + i];
+    /* y_a = M^-1 (row a of J) = L^-1 D^-1 L^-T j */
+    for (a = 0; a < 6; ++a) {
+        double *y = Yv + N * a;
+        for (k = 0; k < N; ++k) y[k] = J[N * a + k];
+        for (k = N - 1; k >= 0; --k)
+            if (y[k] != 0.0)
+                for (i = gagen_dof_parent[k]; i >= 0; i = gagen_dof_parent[i])
+                    y[i] -= M[N * k + i] * y[k];
+        for (k = 0; k < N; ++k) y[k] /= M[N * k + k];
+        for (k = 0; k < N; ++k)
+            for (i = gagen_dof_parent[k]; i >= 0; i = gagen_dof_parent[i])
+                y[k] -= M[N * k + i] * y[i];
+    }
+    if (G != NULL)
+        for (a = 0; a < 6; ++a)
+            for (b = 0; b <= a; ++b) {
+                double s = 0.0;
+                for (k = 0; k < N; ++k) s += J[N * a + k] * Yv[N * b + k];
+                G[6 * a + b] = G[6 * b + a] = s;
+            }
+    if (dG_dq == NULL) return 0;
+    /* the bodies' velocities at the rates y_a (V + 36 t + 6 a) and the subtrees' momenta */
+    for (t = 0; t < GAGEN_CD_NK; ++t) {
+        const int parent = gagen_cd_parent[t], first = gagen_column[gagen_cd_body[t]];
+        const int count = gagen_cd_columns(X, t, S, body);
+        depth[t] = parent >= 0 ? depth[parent] + 1 : 0;
+        gagen_cd_inertia(X, pi, t, I + 36 * t);
+        for (a = 0; a < 6; ++a) {
+            double *Va = V + 36 * t + 6 * a;
+            for (i = 0; i < 6; ++i) {
+                Va[i] = parent >= 0 ? V[36 * parent + 6 * a + i] : 0.0;
+                H[36 * t + 6 * a + i] = 0.0;
+            }
+            for (c = first; c < first + count; ++c)
+                for (i = 0; i < 6; ++i) Va[i] += S[6 * c + i] * Yv[N * a + c];
+            gagen_cd_apply(I + 36 * t, Va, 1.0, H + 36 * t + 6 * a);
+        }
+    }
+    for (t = GAGEN_CD_NK - 1; t >= 0; --t)
+        if (gagen_cd_parent[t] >= 0)
+            for (i = 0; i < 36; ++i) H[36 * gagen_cd_parent[t] + i] += H[36 * t + i];
+    for (k = 0; k < N; ++k) {  /* - Y^T dM Y */
+        const int tk = body[k], pk = gagen_cd_parent[tk];
+        double mk[36];
+        for (a = 0; a < 6; ++a) {
+            static const double rest[6] = {0.0};
+            gagen_td_cross(S + 6 * k, pk >= 0 ? V + 36 * pk + 6 * a : rest, mk + 6 * a);
+        }
+        for (a = 0; a < 6; ++a)
+            for (b = 0; b <= a; ++b)
+                dG_dq[(6 * a + b) * N + k] = dG_dq[(6 * b + a) * N + k] =
+                    gagen_cd_dot(mk + 6 * a, H + 36 * tk + 6 * b)
+                    + gagen_cd_dot(mk + 6 * b, H + 36 * tk + 6 * a);
+    }
+    /* + dJ Y + Y^T dJ^T, over the frame's path (levels: the depth of a column's body) */
+    for (c = 0; c < m; ++c) level[c] = depth[body[cols[c]]];
+    for (j = 0; j < m; ++j)
+        for (k = 0; k < m; ++k) {
+            const double *Jj = col + 6 * j, *Jk = col + 6 * k;
+            double d[6] = {0.0};
+            if (level[k] <= level[j]) {
+                gagen_cross(Jk + 3, Jj, d);
+                gagen_cross(Jk + 3, Jj + 3, d + 3);
+            } else {
+                gagen_cross(Jj + 3, Jk, d);
+            }
+            for (a = 0; a < 6; ++a)
+                for (b = 0; b <= a; ++b) {
+                    const double s = d[a] * Yv[N * b + cols[j]] + d[b] * Yv[N * a + cols[j]];
+                    dG_dq[(6 * a + b) * N + cols[k]] += s;
+                    if (b != a) dG_dq[(6 * b + a) * N + cols[k]] += s;
+                }
+        }
     return 0;
 }
 

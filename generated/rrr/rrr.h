@@ -156,10 +156,16 @@ int rrr_frame_jacobian_time_variation_derivatives(const double *q, const double 
                                                           const double *p, int frame,
                                                           double *ddJ_dq, double *ddJ_dqd);
 /* The rigid-body Coriolis matrix C (as the derivative module's coriolis_matrix; NULL: not
- * written) and dC_dq ((3 3) x 3, row i 3 + j holds dC_ij's derivatives along the
- * velocity directions; NULL: not computed). Returns 0. */
+ * written), dC_dq and dC_dqd ((3 3) x 3, row i 3 + j holds dC_ij's derivatives,
+ * by q along the velocity directions; NULL: not computed). Returns 0. */
 int rrr_coriolis_matrix_derivatives(const double *q, const double *qd,
-                                            const double *p, double *C, double *dC_dq);
+                                            const double *p, double *C, double *dC_dq,
+                                            double *dC_dqd);
+/* G (6 x 6, NULL: not written) of one frame as rrr_delassus gives it, and dG_dq
+ * (36 x 3, row 6 a + b holds G[a][b]'s derivatives along the velocity directions; NULL:
+ * not computed). Returns 0, M's errors or GAGEN_ERR_BAD_ARG for a bad frame. */
+int rrr_delassus_derivatives(const double *q, const double *p, int frame, double *G,
+                                    double *dG_dq);
 /* For the rows m = dims * count (dims 6, or 3: linear rows only) of count frames' stacked
  * LOCAL_WORLD_ALIGNED Jacobians J: G = J M^-1 J^T (m x m) and Lambda = G^-1 (m x m), from
  * M = L^T D L (M is never inverted). work holds m x 3 doubles. They return 0,
