@@ -2,7 +2,8 @@
 kernels gagen.casadi's centroidal functions take their Jacobians from, called as C.
 
 By q along the velocity directions (a floating joint's six as Pinocchio's), on the paper's
-robot, the Panda (fixed base, prismatic fingers) and ANYmal C (floating):
+robot, the Panda (fixed base, prismatic fingers), ANYmal C (floating) and a random tree with
+every joint type and a body welded to the world:
 - against Pinocchio to 1e-9 where it has the quantity: computeCentroidalDynamicsDerivatives'
   dh_dq (the momentum's kernel; A_g's derivative contracted with qd; the time variation's by
   qd, contracted), its dhdot_dq and dhdot_dv at qdd = 0 (the bias's kernel; the time
@@ -20,10 +21,10 @@ import warnings
 
 import numpy as np
 import pytest
-from test_centroidal import FixedBaseReference
 from test_floating import URDF, Reference, random_state
 
 import gagen
+from gagen.casadi.build import model_ident  # the C names' prefix (no CasADi needed)
 from gagen.model.numeric import numeric_model
 from gagen.reference.pinocchio import pinocchio_model
 
@@ -47,7 +48,7 @@ def kernel(dyn, name: str):
     outputs as arrays (rows, nv) or (rows, nv, nv)."""
     lib = ctypes.CDLL(dyn.module.__file__)
     rates, shapes = KERNELS[name]
-    function = getattr(lib, f"{dyn.info.name}_{name}")
+    function = getattr(lib, f"{model_ident(dyn)}_{name}")
     double_p = np.ctypeslib.ndpointer(np.float64, flags="C")
     function.argtypes = [double_p] * ((3 if rates else 2) + len(shapes))
     function.restype = None
@@ -103,40 +104,49 @@ def close(actual, expected, what: str, rtol: float) -> None:
     assert error <= rtol * scale, f"{what}: error {error:.3g} (scale {scale:.3g})"
 
 
-# --- the robots, with Pinocchio's model of each --------------------------------------------
-
-def _rrr():
-    dyn = gagen.load("rrr")
-    return dyn, Reference(dyn, pinocchio_model(numeric_model(dyn.model)))
-
-
-def _panda():
-    dyn = gagen.load(URDF / "panda.urdf")
-    pin = pytest.importorskip("pinocchio")
-    return dyn, FixedBaseReference(dyn, pin.buildModelFromUrdf(str(URDF / "panda.urdf")))
-
+# --- the robots, and Pinocchio's model of each ----------------------------------------------
 
 def _anymal():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", gagen.InertiaWarning)  # ANYmal's CAD round-off
-        dyn = gagen.load(URDF / "anymal_c.urdf", floating_base=True)
+        return gagen.load(URDF / "anymal_c.urdf", floating_base=True)
+
+
+def _tree():
+    """test_centroidal's random tree: revolute, continuous, prismatic (below a revolute)
+    and fixed joints, a body welded to the world (no part of the robot's mass)."""
+    from test_centroidal import every_joint_type_tree
+
+    return gagen.load(every_joint_type_tree())
+
+
+ROBOTS = {"rrr": lambda: gagen.load("rrr"), "panda": lambda: gagen.load(URDF / "panda.urdf"),
+          "anymal": _anymal, "tree": _tree}
+
+
+def pinocchio_reference(name: str, dyn) -> Reference:
+    """Pinocchio's model of the robot: its own URDF parse for the Panda and ANYmal C,
+    gagen's builder's for the others."""
     pin = pytest.importorskip("pinocchio")
-    model = pin.buildModelFromUrdf(str(URDF / "anymal_c.urdf"), pin.JointModelFreeFlyer())
-    return dyn, Reference(dyn, model)
+    if name == "panda":
+        from test_centroidal import FixedBaseReference
 
-
-ROBOTS = {"rrr": _rrr, "panda": _panda, "anymal": _anymal}
+        return FixedBaseReference(dyn, pin.buildModelFromUrdf(str(URDF / "panda.urdf")))
+    if name == "anymal":
+        return Reference(dyn, pin.buildModelFromUrdf(str(URDF / "anymal_c.urdf"),
+                                                     pin.JointModelFreeFlyer()))
+    return Reference(dyn, pinocchio_model(numeric_model(dyn.model)))
 
 
 @pytest.fixture(scope="module", params=list(ROBOTS))
 def robot(request, cache_dir):
-    pytest.importorskip("pinocchio")
-    return ROBOTS[request.param]()
+    return request.param, ROBOTS[request.param]()
 
 
 def test_the_kernels_match_pinocchio(robot):
     pin = pytest.importorskip("pinocchio")
-    dyn, ref = robot
+    name, dyn = robot
+    ref = pinocchio_reference(name, dyn)
     m, d = ref.model, ref.data
     rng = np.random.default_rng(5)
     for _ in range(3):
@@ -172,7 +182,7 @@ def test_the_kernels_match_pinocchio(robot):
 def test_the_kernels_match_central_differences(robot):
     """Every output of every kernel against five-point differences of gagen's own value
     functions (error h^4 f^(5) and eps |f| / h, both far below 1e-6 at h = 1e-3)."""
-    dyn, _ = robot
+    _, dyn = robot
     rng = np.random.default_rng(6)
     for _ in range(2):
         q, v, _ = random_state(dyn, rng)
@@ -187,7 +197,7 @@ def test_the_kernels_agree_with_each_other(robot):
     """The defining identities between the kernels, to rounding: J_com's derivative is A_g's
     linear rows' over the mass, the time variation's by qd is A_g's by q, the bias's by qd is
     dAg + dh/dq, the centre of mass velocity's is the momentum's linear rows over the mass."""
-    dyn, _ = robot
+    _, dyn = robot
     rng = np.random.default_rng(7)
     q, v, _ = random_state(dyn, rng)
     out = kernels(dyn, q, v)
