@@ -195,8 +195,9 @@ def test_the_kernels_match_central_differences(robot):
 
 def test_the_kernels_agree_with_each_other(robot):
     """The defining identities between the kernels, to rounding: J_com's derivative is A_g's
-    linear rows' over the mass, the time variation's by qd is A_g's by q, the bias's by qd is
-    dAg + dh/dq, the centre of mass velocity's is the momentum's linear rows over the mass."""
+    linear rows' over the mass, the time variation's by qd is A_g's by q, the bias's by q is
+    the time variation's times qd and by qd dAg + dh/dq, the centre of mass velocity's is
+    the momentum's linear rows over the mass."""
     _, dyn = robot
     rng = np.random.default_rng(7)
     q, v, _ = random_state(dyn, rng)
@@ -206,6 +207,10 @@ def test_the_kernels_agree_with_each_other(robot):
     mass = float(np.sum(dyn.centroidal_map(q)[:3] * J) / np.sum(J * J))  # A_lin = m J_com
     close(out["com_jacobian_derivatives"][0], dAg[:3] / mass, "dJcom = dAg_lin / m", 1e-12)
     close(out["centroidal_map_time_variation_derivatives"][1], dAg, "ddAg_dqd = dAg_dq", 1e-12)
+    # the bias's by q (its own O(nv) sum) is the time variation's by q (pair by pair) times qd
+    close(out["centroidal_bias_derivatives"][0],
+          np.einsum("rki,k->ri", out["centroidal_map_time_variation_derivatives"][0], v),
+          "db_dq = ddAg_dq qd", 1e-12)
     close(out["centroidal_bias_derivatives"][1],
           dyn.centroidal_map_time_variation(q, v) + out["centroidal_momentum_derivatives"][0],
           "db_dqd = dAg + dh_dq", 1e-12)
