@@ -143,16 +143,20 @@ def reference(dyn, name: str, q, qd, u, frame=None):
     if name == "frame_velocity":
         return [dyn.frame_velocity(q, qd, frame)], {"q": None,
                                                     "qd": [dyn.frame_jacobian(q, frame)]}
-    # the centre of mass and centroidal functions, where the model's C has them
+    # the centre of mass and centroidal functions, where the model's C has them: their
+    # derivatives from the model's centroidal derivative kernels, called as C
     if name == "center_of_mass":
         return [dyn.center_of_mass(q)], {"q": [dyn.com_jacobian(q)]}
     if name == "com_velocity":
-        return [dyn.com_velocity(q, qd)], {"q": None, "qd": [dyn.com_jacobian(q)]}
+        dv_dq, = centroidal_kernel(dyn, "com_velocity_derivatives", q, qd)
+        return [dyn.com_velocity(q, qd)], {"q": [dv_dq], "qd": [dyn.com_jacobian(q)]}
     if name == "centroidal_momentum":
-        return [dyn.centroidal_momentum(q, qd)], {"q": None, "qd": [dyn.centroidal_map(q)]}
+        dh_dq, = centroidal_kernel(dyn, "centroidal_momentum_derivatives", q, qd)
+        return [dyn.centroidal_momentum(q, qd)], {"q": [dh_dq], "qd": [dyn.centroidal_map(q)]}
     if name in CENTROIDAL_MATRICES:
-        return [casadi_layout(np.asarray(CENTROIDAL_MATRICES[name](dyn, q, qd)))], {
-            port: None for port in ("q", "qd")}
+        blocks = centroidal_kernel(dyn, CENTROIDAL_KERNELS[name], q, qd)
+        return [casadi_layout(np.asarray(CENTROIDAL_MATRICES[name](dyn, q, qd)))], dict(
+            zip(("q", "qd"), ([casadi_rows(b)] for b in blocks)))
     # task space: by qdd the frame Jacobian, the rest by central differences only
     if name == "frame_acceleration":
         return [dyn.frame_acceleration(q, qd, u, frame)], {
@@ -176,7 +180,27 @@ TASK_SPACE = {
 }
 
 
-# gagen's own calls of the centroidal functions without a derivative kernel
+def centroidal_kernel(dyn, name: str, q, qd) -> list[np.ndarray]:
+    """The outputs of the model's centroidal derivative kernel <model>_<name>."""
+    from test_centroidal_derivatives import kernel
+
+    return kernel(dyn, name)(q, qd)
+
+
+def casadi_rows(D: np.ndarray) -> np.ndarray:
+    """A derivative (rows, nv) of a vector, or (rows, cols, nv) of a matrix (rows x cols,
+    row-major) as CasADi's Jacobian block: one row per entry in column-major order."""
+    return D if D.ndim == 2 else D.transpose(1, 0, 2).reshape(-1, D.shape[-1])
+
+
+# gagen's own calls of the centroidal matrix functions, and the kernel of their derivatives
+# (by q; by q and qd for those of qd)
+CENTROIDAL_KERNELS = {
+    "com_jacobian": "com_jacobian_derivatives",
+    "centroidal_map": "centroidal_map_derivatives",
+    "centroidal_map_time_variation": "centroidal_map_time_variation_derivatives",
+    "centroidal_bias": "centroidal_bias_derivatives",
+}
 CENTROIDAL_MATRICES = {
     "com_jacobian": lambda dyn, q, qd, p=None: dyn.com_jacobian(q, p),
     "centroidal_map": lambda dyn, q, qd, p=None: dyn.centroidal_map(q, p),

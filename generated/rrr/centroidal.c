@@ -423,38 +423,46 @@ void rrr_centroidal_momentum(const double *q, const double *qd, const double *p,
     }
 }
 
+/* d (9): the rate of a body's inertia b = (m, h, I) about the point fixed in space where g
+ * is, under its velocity v = (v, w) there: dh = P (its linear momentum) and
+ * dI = [w] I - I [w] - [v][h] - [h][v] (upper triangle); dm = 0 */
+static void gagen_cg_rate(const double *restrict b, const double *restrict v,
+                          double *restrict d)
+{
+    const double *h = b + 1, *I = b + 4, *w = v + 3;
+    const double full[9] = {I[0], I[1], I[2], I[1], I[3], I[4], I[2], I[4], I[5]};
+    double f[6], WI[9], vh;
+    int i, j;
+    gagen_cg_momentum(b, v, f);
+    for (i = 0; i < 3; ++i) d[i] = f[i];
+    for (j = 0; j < 3; ++j) {  /* column j of [w] I: w x (I's column j) */
+        const double c[3] = {full[j], full[3 + j], full[6 + j]};
+        double wc[3];
+        gagen_cg_cross(w, c, wc);
+        for (i = 0; i < 3; ++i) WI[3 * i + j] = wc[i];
+    }
+    /* - I [w] = ([w] I)^T, I symmetric; [v][h] + [h][v] = h v^T + v h^T - 2 (v.h) E */
+    vh = 2.0 * (v[0] * h[0] + v[1] * h[1] + v[2] * h[2]);
+    for (i = 0; i < 3; ++i)
+        for (j = i; j < 3; ++j)
+            d[3 + (i == 0 ? j : i + j + 1)] = WI[3 * i + j] + WI[3 * j + i]
+                                              - (h[i] * v[j] + v[i] * h[j])
+                                              + (i == j ? vh : 0.0);
+}
+
 void rrr_centroidal_map_time_variation(const double *q, const double *qd,
                                                const double *p, double *dAg)
 {
     double X[15 * GAGEN_CG_NB], B[10 * GAGEN_CG_NM], D[9 * GAGEN_CG_NM], V[6 * GAGEN_CG_NM];
     double g[3], vcom[3] = {0.0, 0.0, 0.0};
     const double mass = gagen_cg_links(q, p, 1, X, B, g);
-    int k, r, i, j;
+    int k, r, i;
     gagen_cg_velocities(X, qd, g, V, 0);
-    /* D (9 per moving body): each body's dh = P and dI = [w] I - I [w] - [v][h] - [h][v]
-     * (upper triangle), then each subtree's sums; the bodies' B become the composites */
+    /* D (9 per moving body): each body's rate (gagen_cg_rate), then each subtree's sums;
+     * the bodies' B become the composites */
     for (k = 0; k < GAGEN_CG_NM; ++k) {
-        const double *b = B + 10 * k, *h = b + 1, *I = b + 4, *v = V + 6 * k, *w = v + 3;
-        const double full[9] = {I[0], I[1], I[2], I[1], I[3], I[4], I[2], I[4], I[5]};
-        double *d = D + 9 * k, f[6], WI[9], vh;
-        gagen_cg_momentum(b, v, f);
-        for (i = 0; i < 3; ++i) {
-            d[i] = f[i];
-            vcom[i] += f[i] / mass;
-        }
-        for (j = 0; j < 3; ++j) {  /* column j of [w] I: w x (I's column j) */
-            const double c[3] = {full[j], full[3 + j], full[6 + j]};
-            double wc[3];
-            gagen_cg_cross(w, c, wc);
-            for (i = 0; i < 3; ++i) WI[3 * i + j] = wc[i];
-        }
-        /* - I [w] = ([w] I)^T, I symmetric; [v][h] + [h][v] = h v^T + v h^T - 2 (v.h) E */
-        vh = 2.0 * (v[0] * h[0] + v[1] * h[1] + v[2] * h[2]);
-        for (i = 0; i < 3; ++i)
-            for (j = i; j < 3; ++j)
-                d[3 + (i == 0 ? j : i + j + 1)] = WI[3 * i + j] + WI[3 * j + i]
-                                                  - (h[i] * v[j] + v[i] * h[j])
-                                                  + (i == j ? vh : 0.0);
+        gagen_cg_rate(B + 10 * k, V + 6 * k, D + 9 * k);
+        for (i = 0; i < 3; ++i) vcom[i] += D[9 * k + i] / mass;
     }
     gagen_cg_subtrees(B, 10);
     gagen_cg_subtrees(D, 9);
@@ -504,5 +512,348 @@ void rrr_centroidal_bias(const double *q, const double *qd, const double *p,
         gagen_cg_cross_add(v + 3, f + 3, rate + 3);
         gagen_cg_cross_add(v, f, rate + 3);
         for (i = 0; i < 6; ++i) b[i] += rate[i];
+    }
+}
+
+/* The centroidal quantities' derivatives by q, along the velocity directions (a floating
+ * joint's six as Pinocchio's: the body's own axes), as gagen's derivative kernels give them;
+ * by qd where they depend on it. Part of centroidal.c (its helpers and conventions).
+ *
+ * Spatial algebra in world axes about the point P fixed in space where g is: motions
+ * (v, w), forces (f, n), a x b = (wa x vb + va x wb, wa x wb), a x* F = (w x f, w x n + v x f),
+ * and the rate of an inertia I under a motion a, Psi(a, I) = a x* I - I a x. Coordinate i's
+ * motion S_i carries the subtree of its body rigidly, so (i <= k: i's body is k's or one of
+ * its ancestors; i > k: a descendant's; V_b a body's velocity, u_i the velocity of i's
+ * body's parent, C_b and dC_b a subtree's composite inertia and its rate, H_b its momentum):
+ *   d S_k / dq_i = S_i x S_k (i <= k), 0 otherwise
+ *   A_k = C_k S_k (about P), d A_k / dq_i = S_i x* A_k (i <= k), Psi(S_i, C_i) S_k (i > k)
+ *   h = sum_b I_b V_b, dh / dq_i = S_i x* H_i - C_i (S_i x u_i)
+ *   dA_k = d/dt A_k = dC_k S_k + C_k (V_k x S_k), and with qd held,
+ *     d dA_k / dq_i = S_i x* dA_k - (S_i x u_i) x* A_k (i <= k),
+ *                     [Psi(S_i, dC_i) - Psi(S_i x u_i, C_i)] S_k + Psi(S_i, C_i) (V_k x S_k)
+ *                     (i > k)
+ * (V_b changes by S_i x (V_b - u_i) for b in i's subtree; the rest follows from
+ * [a x*, b x*] = (a x b) x*.) The bias's derivative sums the last over k in O(NV)
+ * (gagen_cgd_bias_derivatives); the matrices' are NV x NV pairs. About g itself, which moves with q: the angular rows lose
+ * dg/dq_i x (the linear rows), dg/dq_i = A_lin_i / m (and their rates, in dA's). Checked
+ * against Pinocchio (computeCentroidalDynamicsDerivatives, getCenterOfMassVelocityDerivatives)
+ * and central differences in tests/test_centroidal_derivatives.py. */
+
+/* out = a x* F for a motion a and a force F */
+static inline void gagen_cgd_force_cross(const double *restrict a, const double *restrict F,
+                                         double *restrict out)
+{
+    gagen_cg_cross(a + 3, F, out);
+    gagen_cg_cross(a + 3, F + 3, out + 3);
+    gagen_cg_cross_add(a, F, out + 3);
+}
+
+/* out = Psi(a, I) x = a x* (I x) - I (a x x), I an inertia (or an inertia's rate: mass 0) */
+static inline void gagen_cgd_psi(const double *restrict a, const double *restrict I,
+                                 const double *restrict x, double *restrict out)
+{
+    double f[6], ax[6], g[6];
+    int r;
+    gagen_cg_momentum(I, x, f);
+    gagen_cgd_force_cross(a, f, out);
+    gagen_cg_motion_cross(a, x, ax);
+    gagen_cg_momentum(I, ax, g);
+    for (r = 0; r < 6; ++r) out[r] -= g[r];
+}
+
+/* What the derivatives are made of, at one state */
+typedef struct {
+    double X[15 * GAGEN_CG_NB];
+    double C[10 * GAGEN_CG_NM];   /* per moving body: its subtree's inertia about g */
+    double dC[10 * GAGEN_CG_NM];  /* and its rate (mass 0), with qd */
+    double H[6 * GAGEN_CG_NM];    /* its subtree's momentum, with qd */
+    double V[6 * GAGEN_CG_NM];    /* the body's velocity at g, with qd */
+    double S[6 * GAGEN_CG_NV];    /* per coordinate: its motion */
+    double A[6 * GAGEN_CG_NV];    /* A_g's column */
+    double dA[6 * GAGEN_CG_NV];   /* d/dt of A's column about P (g held), with qd */
+    double VS[6 * GAGEN_CG_NV];   /* V_k x S_k, with qd */
+    /* with qd, per moving body, over its subtree's coordinates k: G = sum A_k qd_k and
+     * T = sum dA_k qd_k; and Z = sum V_c x (S qd)_c over c, the body and its ancestors */
+    double G[6 * GAGEN_CG_NM], T[6 * GAGEN_CG_NM], Z[6 * GAGEN_CG_NM];
+    double g[3], vcom[3], h[6], b[6], mass;  /* b: sum_k dA_k qd_k about P */
+    int body[GAGEN_CG_NV];        /* the coordinate's moving body */
+} gagen_cgd;
+
+/* Fills c at q (and at qd, unless it is NULL) */
+static void gagen_cgd_setup(const double *q, const double *qd, const double *p, gagen_cgd *c)
+{
+    int k, r, i;
+    c->mass = gagen_cg_links(q, p, 1, c->X, c->C, c->g);
+    if (qd) {
+        double own[10];
+        gagen_cg_velocities(c->X, qd, c->g, c->V, 0);
+        for (i = 0; i < 6; ++i) c->h[i] = 0.0;
+        for (k = 0; k < GAGEN_CG_NM; ++k) {
+            gagen_cg_momentum(c->C + 10 * k, c->V + 6 * k, c->H + 6 * k);
+            for (i = 0; i < 6; ++i) c->h[i] += c->H[6 * k + i];
+            gagen_cg_rate(c->C + 10 * k, c->V + 6 * k, own + 1);
+            c->dC[10 * k] = 0.0;
+            for (i = 1; i < 10; ++i) c->dC[10 * k + i] = own[i];
+        }
+        for (i = 0; i < 3; ++i) c->vcom[i] = c->h[i] / c->mass;
+        gagen_cg_subtrees(c->H, 6);
+        gagen_cg_subtrees(c->dC, 10);
+    }
+    gagen_cg_subtrees(c->C, 10);
+    for (k = 0; k < GAGEN_CG_NM; ++k) {
+        const int kind = gagen_cg_kind[k], count = gagen_cg_count(kind);
+        double own[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+        if (qd)
+            for (i = 0; i < 6; ++i) c->G[6 * k + i] = c->T[6 * k + i] = 0.0;
+        for (r = 0; r < count; ++r) {
+            const int j = gagen_cg_column[k] + r;
+            double *S = c->S + 6 * j, f[6];
+            c->body[j] = k;
+            gagen_cg_motion(c->X + 15 * gagen_cg_at[k], kind, r, c->g, S);
+            gagen_cg_momentum(c->C + 10 * k, S, c->A + 6 * j);
+            if (qd) {
+                gagen_cg_motion_cross(c->V + 6 * k, S, c->VS + 6 * j);
+                gagen_cg_momentum(c->dC + 10 * k, S, c->dA + 6 * j);
+                gagen_cg_momentum(c->C + 10 * k, c->VS + 6 * j, f);
+                for (i = 0; i < 6; ++i) {
+                    c->dA[6 * j + i] += f[i];
+                    own[i] += S[i] * qd[j];
+                    c->G[6 * k + i] += c->A[6 * j + i] * qd[j];
+                    c->T[6 * k + i] += c->dA[6 * j + i] * qd[j];
+                }
+            }
+        }
+        if (qd) {  /* Z = Z_parent + V x (S qd), parents first */
+            const int parent = gagen_cg_parent[k];
+            gagen_cg_motion_cross(c->V + 6 * k, own, c->Z + 6 * k);
+            if (parent >= 0)
+                for (i = 0; i < 6; ++i) c->Z[6 * k + i] += c->Z[6 * parent + i];
+        }
+    }
+    if (qd) {
+        for (i = 0; i < 6; ++i) c->b[i] = 0.0;
+        for (k = 0; k < GAGEN_CG_NM; ++k)
+            for (i = 0; i < 6; ++i) c->b[i] += c->T[6 * k + i];
+        gagen_cg_subtrees(c->G, 6);
+        gagen_cg_subtrees(c->T, 6);
+    }
+}
+
+/* 1 where moving body a is b or one of its ancestors (parents come first) */
+static inline int gagen_cgd_carries(int a, int b)
+{
+    while (b > a) b = gagen_cg_parent[b];
+    return b == a;
+}
+
+/* u: the velocity of the parent of coordinate i's body (0 at the root) */
+static inline void gagen_cgd_parent_velocity(const gagen_cgd *c, int i, double *u)
+{
+    const int parent = gagen_cg_parent[c->body[i]];
+    int r;
+    for (r = 0; r < 6; ++r) u[r] = parent >= 0 ? c->V[6 * parent + r] : 0.0;
+}
+
+/* dh: d h / dq_i about P (6), with qd */
+static void gagen_cgd_momentum_by(const gagen_cgd *c, int i, double *dh)
+{
+    const int b = c->body[i];
+    double u[6], w[6], f[6];
+    int r;
+    gagen_cgd_parent_velocity(c, i, u);
+    gagen_cg_motion_cross(c->S + 6 * i, u, w);
+    gagen_cgd_force_cross(c->S + 6 * i, c->H + 6 * b, dh);
+    gagen_cg_momentum(c->C + 10 * b, w, f);
+    for (r = 0; r < 6; ++r) dh[r] -= f[r];
+}
+
+/* dA: d A_k / dq_i about P; with `rates`, ddA: d dA_k / dq_i about P (qd held) */
+static void gagen_cgd_column_by(const gagen_cgd *c, int i, int k, int rates, double *dA,
+                                double *ddA)
+{
+    const int bi = c->body[i], bk = c->body[k];
+    const double *Si = c->S + 6 * i, *Sk = c->S + 6 * k;
+    double u[6], w[6], t[6];
+    int r;
+    if (gagen_cgd_carries(bi, bk)) {  /* i's motion turns k's column rigidly */
+        gagen_cgd_force_cross(Si, c->A + 6 * k, dA);
+        if (!rates) return;
+        gagen_cgd_parent_velocity(c, i, u);
+        gagen_cg_motion_cross(Si, u, w);
+        gagen_cgd_force_cross(Si, c->dA + 6 * k, ddA);
+        gagen_cgd_force_cross(w, c->A + 6 * k, t);
+        for (r = 0; r < 6; ++r) ddA[r] -= t[r];
+    } else if (gagen_cgd_carries(bk, bi)) {  /* i's moves part of k's subtree */
+        const double *C = c->C + 10 * bi, *dC = c->dC + 10 * bi;
+        gagen_cgd_psi(Si, C, Sk, dA);
+        if (!rates) return;
+        gagen_cgd_parent_velocity(c, i, u);
+        gagen_cg_motion_cross(Si, u, w);
+        gagen_cgd_psi(Si, dC, Sk, ddA);
+        gagen_cgd_psi(w, C, Sk, t);
+        for (r = 0; r < 6; ++r) ddA[r] -= t[r];
+        gagen_cgd_psi(Si, C, c->VS + 6 * k, t);
+        for (r = 0; r < 6; ++r) ddA[r] += t[r];
+    } else {
+        for (r = 0; r < 6; ++r) dA[r] = 0.0;
+        if (rates)
+            for (r = 0; r < 6; ++r) ddA[r] = 0.0;
+    }
+}
+
+/* dAg (6 x NV x NV, [(r NV + k) NV + i] = d Ag[r][k] / dq_i) and, with `rates`, ddAg (the
+ * same of dAg = d/dt Ag, qd held). About g: dg/dq_i = A_lin_i / m, and dg/dt = vcom
+ * changes by (dh/dq_i)_lin / m. */
+static void gagen_cgd_map_by(const gagen_cgd *c, int rates, double *dAg, double *ddAg)
+{
+    const double m = c->mass;
+    int i, k, r;
+    for (i = 0; i < GAGEN_CG_NV; ++i) {
+        const double gi[3] = {c->A[6 * i] / m, c->A[6 * i + 1] / m, c->A[6 * i + 2] / m};
+        double dh[6], dvcom[3] = {0.0, 0.0, 0.0};
+        if (rates) {
+            gagen_cgd_momentum_by(c, i, dh);
+            for (r = 0; r < 3; ++r) dvcom[r] = dh[r] / m;
+        }
+        for (k = 0; k < GAGEN_CG_NV; ++k) {
+            const double *Ak = c->A + 6 * k, *dAk = c->dA + 6 * k;
+            double dA[6], ddA[6], t[3];
+            gagen_cgd_column_by(c, i, k, rates, dA, ddA);
+            if (rates) {
+                /* dAg's angular rows are dA's less vcom x A_lin_k: their change by q_i */
+                gagen_cg_cross(dvcom, Ak, t);
+                for (r = 0; r < 3; ++r) ddA[3 + r] -= t[r];
+                gagen_cg_cross(c->vcom, dA, t);
+                for (r = 0; r < 3; ++r) ddA[3 + r] -= t[r];
+                gagen_cg_cross(gi, dAk, t);
+                for (r = 0; r < 3; ++r) ddA[3 + r] -= t[r];
+                for (r = 0; r < 6; ++r) ddAg[(r * GAGEN_CG_NV + k) * GAGEN_CG_NV + i] = ddA[r];
+            }
+            gagen_cg_cross(gi, Ak, t);
+            for (r = 0; r < 3; ++r) dA[3 + r] -= t[r];
+            for (r = 0; r < 6; ++r) dAg[(r * GAGEN_CG_NV + k) * GAGEN_CG_NV + i] = dA[r];
+        }
+    }
+}
+
+/* db_dq (6 x NV): d (dAg qd) / dq, qd held, in O(NV): the sum over k of d dA_k / dq_i qd_k
+ * (gagen_cgd_column_by's cases) is, with u = u_i, w = S_i x u and i's body's G, T and C,
+ * S_i x* T - w x* G (k in i's subtree) + [Psi(S_i, dC) - Psi(w, C)] u + Psi(S_i, C) Z_parent
+ * (k above it: sum S_k qd_k = u, sum (V_k x S_k) qd_k = Z_parent); about g, the angular rows
+ * lose d vcom / dq_i x h_lin + vcom x (dh / dq_i)_lin + dg / dq_i x b_lin. */
+static void gagen_cgd_bias_derivatives(const gagen_cgd *c, double *db_dq)
+{
+    const double m = c->mass;
+    int i, r;
+    for (i = 0; i < GAGEN_CG_NV; ++i) {
+        const int bi = c->body[i], parent = gagen_cg_parent[bi];
+        const double *Si = c->S + 6 * i, *C = c->C + 10 * bi, *dC = c->dC + 10 * bi;
+        const double zero[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+        const double *Z = parent >= 0 ? c->Z + 6 * parent : zero;
+        const double gi[3] = {c->A[6 * i] / m, c->A[6 * i + 1] / m, c->A[6 * i + 2] / m};
+        double u[6], w[6], out[6], t[6], dh[6], dvcom[3];
+        gagen_cgd_parent_velocity(c, i, u);
+        gagen_cg_motion_cross(Si, u, w);
+        gagen_cgd_force_cross(Si, c->T + 6 * bi, out);
+        gagen_cgd_force_cross(w, c->G + 6 * bi, t);
+        for (r = 0; r < 6; ++r) out[r] -= t[r];
+        gagen_cgd_psi(Si, dC, u, t);
+        for (r = 0; r < 6; ++r) out[r] += t[r];
+        gagen_cgd_psi(w, C, u, t);
+        for (r = 0; r < 6; ++r) out[r] -= t[r];
+        gagen_cgd_psi(Si, C, Z, t);
+        for (r = 0; r < 6; ++r) out[r] += t[r];
+        gagen_cgd_momentum_by(c, i, dh);
+        for (r = 0; r < 3; ++r) dvcom[r] = dh[r] / m;
+        gagen_cg_cross(dvcom, c->h, t);
+        gagen_cg_cross_add(c->vcom, dh, t);
+        gagen_cg_cross_add(gi, c->b, t);
+        for (r = 0; r < 3; ++r) out[3 + r] -= t[r];
+        for (r = 0; r < 6; ++r) db_dq[r * GAGEN_CG_NV + i] = out[r];
+    }
+}
+
+/* dh_dq (6 x NV) of h_g about g: dh/dq_i less (0, dg/dq_i x h_lin) */
+static void gagen_cgd_momentum_derivatives(const gagen_cgd *c, double *dh_dq)
+{
+    int i, r;
+    for (i = 0; i < GAGEN_CG_NV; ++i) {
+        const double m = c->mass;
+        const double gi[3] = {c->A[6 * i] / m, c->A[6 * i + 1] / m, c->A[6 * i + 2] / m};
+        double dh[6], t[3];
+        gagen_cgd_momentum_by(c, i, dh);
+        gagen_cg_cross(gi, c->h, t);
+        for (r = 0; r < 3; ++r) dh[3 + r] -= t[r];
+        for (r = 0; r < 6; ++r) dh_dq[r * GAGEN_CG_NV + i] = dh[r];
+    }
+}
+
+void rrr_centroidal_map_derivatives(const double *q, const double *p, double *dAg_dq)
+{
+    gagen_cgd c;
+    gagen_cgd_setup(q, 0, p, &c);
+    gagen_cgd_map_by(&c, 0, dAg_dq, 0);
+}
+
+void rrr_com_jacobian_derivatives(const double *q, const double *p, double *dJ_dq)
+{
+    gagen_cgd c;
+    int i, k, r;
+    gagen_cgd_setup(q, 0, p, &c);
+    for (k = 0; k < GAGEN_CG_NV; ++k)
+        for (i = 0; i < GAGEN_CG_NV; ++i) {
+            double dA[6], unused[6];
+            gagen_cgd_column_by(&c, i, k, 0, dA, unused);  /* linear rows: g's motion drops */
+            for (r = 0; r < 3; ++r)
+                dJ_dq[(r * GAGEN_CG_NV + k) * GAGEN_CG_NV + i] = dA[r] / c.mass;
+        }
+}
+
+void rrr_centroidal_momentum_derivatives(const double *q, const double *qd,
+                                                 const double *p, double *dh_dq)
+{
+    gagen_cgd c;
+    gagen_cgd_setup(q, qd, p, &c);
+    gagen_cgd_momentum_derivatives(&c, dh_dq);
+}
+
+void rrr_com_velocity_derivatives(const double *q, const double *qd, const double *p,
+                                          double *dv_dq)
+{
+    gagen_cgd c;
+    int i, r;
+    gagen_cgd_setup(q, qd, p, &c);
+    for (i = 0; i < GAGEN_CG_NV; ++i) {
+        double dh[6];
+        gagen_cgd_momentum_by(&c, i, dh);  /* the linear rows: the same about any point */
+        for (r = 0; r < 3; ++r) dv_dq[r * GAGEN_CG_NV + i] = dh[r] / c.mass;
+    }
+}
+
+void rrr_centroidal_map_time_variation_derivatives(const double *q, const double *qd,
+                                                           const double *p, double *dA_dq,
+                                                           double *dA_dqd)
+{
+    gagen_cgd c;
+    gagen_cgd_setup(q, qd, p, &c);
+    /* dAg = sum_i (d Ag / dq_i) qd_i: its derivative by qd_i is d Ag / dq_i */
+    gagen_cgd_map_by(&c, 1, dA_dqd, dA_dq);
+}
+
+void rrr_centroidal_bias_derivatives(const double *q, const double *qd,
+                                             const double *p, double *db_dq, double *db_dqd)
+{
+    gagen_cgd c;
+    int k, r;
+    gagen_cgd_setup(q, qd, p, &c);
+    gagen_cgd_bias_derivatives(&c, db_dq);
+    /* b = dAg qd: by qd_k, dAg's column k plus (d dAg / dqd_k) qd = d h_g / dq_k */
+    gagen_cgd_momentum_derivatives(&c, db_dqd);
+    for (k = 0; k < GAGEN_CG_NV; ++k) {
+        const double *Ak = c.A + 6 * k, *dAk = c.dA + 6 * k;
+        double t[3];
+        gagen_cg_cross(c.vcom, Ak, t);
+        for (r = 0; r < 6; ++r)
+            db_dqd[r * GAGEN_CG_NV + k] += dAk[r] - (r >= 3 ? t[r - 3] : 0.0);
     }
 }

@@ -94,7 +94,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "eb48f217d582da583d671a2780e534f20a271f07a72d6a6e92a7ce1b5cb76154") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "cb4daa5b1b63a460d9050ae20e3804058a029fa32df7feeb69e097b26fdfb9e8") < 0) {
         Py_DECREF(module);
         return NULL;
     }

@@ -256,6 +256,29 @@ void rrr_centroidal_map_time_variation(const double *q, const double *qd,
 /* b = dAg qd (6): d/dt h_g = Ag qdd + b */
 void rrr_centroidal_bias(const double *q, const double *qd, const double *p,
                                  double *b);
+/* Their derivatives by q along the velocity directions (a floating joint's six as Pinocchio's
+ * and the derivative kernels'), analytic: a derivative by q of an m x 3 matrix is
+ * m x 3 x 3, [(r 3 + k) 3 + i] = d X[r][k] / dq_i; of a vector,
+ * [r 3 + i] = d x[r] / dq_i. */
+/* dJ_dq: d J_com / dq (3 x 3 x 3) */
+void rrr_com_jacobian_derivatives(const double *q, const double *p, double *dJ_dq);
+/* dv_dq: d vcom / dq (3 x 3); by qd it is J_com */
+void rrr_com_velocity_derivatives(const double *q, const double *qd, const double *p,
+                                          double *dv_dq);
+/* dAg_dq: d Ag / dq (6 x 3 x 3) */
+void rrr_centroidal_map_derivatives(const double *q, const double *p, double *dAg_dq);
+/* dh_dq: d h_g / dq (6 x 3), Pinocchio's dh_dq; by qd it is Ag */
+void rrr_centroidal_momentum_derivatives(const double *q, const double *qd,
+                                                 const double *p, double *dh_dq);
+/* dA_dq, dA_dqd: d dAg / dq and d dAg / dqd (6 x 3 x 3 each; the second is
+ * d Ag / dq: dAg = sum_i (d Ag / dq_i) qd_i) */
+void rrr_centroidal_map_time_variation_derivatives(const double *q, const double *qd,
+                                                           const double *p, double *dA_dq,
+                                                           double *dA_dqd);
+/* db_dq, db_dqd: d b / dq and d b / dqd (6 x 3 each), b = dAg qd (Pinocchio's
+ * dhdot_dq and dhdot_dv at qdd = 0) */
+void rrr_centroidal_bias_derivatives(const double *q, const double *qd,
+                                             const double *p, double *db_dq, double *db_dqd);
 
 #ifdef __cplusplus
 }

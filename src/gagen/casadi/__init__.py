@@ -24,6 +24,10 @@ Which derivatives are analytic (gagen.casadi.table has the details):
   <model>_delassus_derivatives;
 - coriolis_matrix: by q and qd the model's kernel <model>_coriolis_matrix_derivatives
   (Pinocchio's C in forward mode, spatial algebra);
+- center_of_mass, com_velocity, com_jacobian, centroidal_map, centroidal_momentum,
+  centroidal_map_time_variation, centroidal_bias: by q and qd from the model's centroidal
+  C (com_jacobian, centroidal_map and the analytic *_derivatives kernels of
+  model/centroidal_derivatives.c.j2);
 - by the parameters p (the `_p` functions, `parameters=True`): for inverse_dynamics,
   forward_dynamics and gravity, the inertial parameters (masses, centres of mass,
   inertias, joint damping, friction, armature: those the regressor Y does not depend on)

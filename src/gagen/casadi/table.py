@@ -268,15 +268,9 @@ FRAME_VELOCITY = Entry(
 )
 
 # --- the centre of mass and centroidal dynamics (where the model's C has them) -------------
-
-def _central_by_q(output: str) -> str:
-    """C: central differences of the entry's value by q's nq entries into D_<output>_q."""
-    return f"""
-    {{{{
-        double *blocks[1] = {{{{D_{output}_q}}}};
-        return gc_central(GC_SELF, frame, in, 0, blocks, ws);
-    }}}}"""
-
+# Their Jacobians by q are the model's analytic centroidal derivative kernels
+# (model/centroidal_derivatives.c.j2: the motion subspaces' spatial algebra), along the
+# velocity directions; by qd the maps themselves, or the kernels where a map depends on qd.
 
 CENTER_OF_MASS = Entry(
     name="center_of_mass",
@@ -293,11 +287,12 @@ COM_VELOCITY = Entry(
     inputs=(_q(), _v("qd")),
     outputs=(Port("vcom", 3),),
     value="{ident}_com_velocity(q, qd, p, vcom);\n    return 0;",
-    jacobian="{ident}_com_jacobian(q, p, D_vcom_qd);" + _central_by_q("vcom"),
-    work=lambda s: s["central"],
-    tangent=False,
-    requires=("com_velocity", "com_jacobian"),
-    doc="vcom = com_velocity(q, qd) = J_com qd: by qd J_com, by q central differences",
+    jacobian="""
+    {ident}_com_jacobian(q, p, D_vcom_qd);
+    {ident}_com_velocity_derivatives(q, qd, p, D_vcom_q);
+    return 0;""",
+    requires=("com_velocity", "com_jacobian", "com_velocity_derivatives"),
+    doc="vcom = com_velocity(q, qd) = J_com qd: by qd J_com, by q com_velocity_derivatives",
 )
 
 COM_JACOBIAN = Entry(
@@ -305,8 +300,9 @@ COM_JACOBIAN = Entry(
     inputs=(_q(),),
     outputs=(Port("J", 3, "nv"),),
     value="{ident}_com_jacobian(q, p, J);\n    return 0;",
-    requires=("com_jacobian",),
-    doc="J = com_jacobian(q): central differences",
+    jacobian="{ident}_com_jacobian_derivatives(q, p, D_J_q);\n    return 0;",
+    requires=("com_jacobian", "com_jacobian_derivatives"),
+    doc="J = com_jacobian(q): the Jacobian from com_jacobian_derivatives",
 )
 
 CENTROIDAL_MAP = Entry(
@@ -314,8 +310,9 @@ CENTROIDAL_MAP = Entry(
     inputs=(_q(),),
     outputs=(Port("Ag", 6, "nv"),),
     value="{ident}_centroidal_map(q, p, Ag);\n    return 0;",
-    requires=("centroidal_map",),
-    doc="Ag = centroidal_map(q): central differences",
+    jacobian="{ident}_centroidal_map_derivatives(q, p, D_Ag_q);\n    return 0;",
+    requires=("centroidal_map", "centroidal_map_derivatives"),
+    doc="Ag = centroidal_map(q): the Jacobian from centroidal_map_derivatives",
 )
 
 CENTROIDAL_MOMENTUM = Entry(
@@ -323,11 +320,13 @@ CENTROIDAL_MOMENTUM = Entry(
     inputs=(_q(), _v("qd")),
     outputs=(Port("hg", 6),),
     value="{ident}_centroidal_momentum(q, qd, p, hg);\n    return 0;",
-    jacobian="{ident}_centroidal_map(q, p, D_hg_qd);" + _central_by_q("hg"),
-    work=lambda s: s["central"],
-    tangent=False,
-    requires=("centroidal_momentum", "centroidal_map"),
-    doc="hg = centroidal_momentum(q, qd) = Ag qd: by qd Ag, by q central differences",
+    jacobian="""
+    {ident}_centroidal_map(q, p, D_hg_qd);
+    {ident}_centroidal_momentum_derivatives(q, qd, p, D_hg_q);
+    return 0;""",
+    requires=("centroidal_momentum", "centroidal_map", "centroidal_momentum_derivatives"),
+    doc="hg = centroidal_momentum(q, qd) = Ag qd: by qd Ag, by q "
+        "centroidal_momentum_derivatives",
 )
 
 CENTROIDAL_MAP_TIME_VARIATION = Entry(
@@ -335,8 +334,11 @@ CENTROIDAL_MAP_TIME_VARIATION = Entry(
     inputs=(_q(), _v("qd")),
     outputs=(Port("dAg", 6, "nv"),),
     value="{ident}_centroidal_map_time_variation(q, qd, p, dAg);\n    return 0;",
-    requires=("centroidal_map_time_variation",),
-    doc="dAg = centroidal_map_time_variation(q, qd): central differences",
+    jacobian="{ident}_centroidal_map_time_variation_derivatives(q, qd, p, D_dAg_q, "
+             "D_dAg_qd);\n    return 0;",
+    requires=("centroidal_map_time_variation", "centroidal_map_time_variation_derivatives"),
+    doc="dAg = centroidal_map_time_variation(q, qd): the Jacobian from "
+        "centroidal_map_time_variation_derivatives (by qd: dAg/dq)",
 )
 
 CENTROIDAL_BIAS = Entry(
@@ -344,8 +346,9 @@ CENTROIDAL_BIAS = Entry(
     inputs=(_q(), _v("qd")),
     outputs=(Port("b", 6),),
     value="{ident}_centroidal_bias(q, qd, p, b);\n    return 0;",
-    requires=("centroidal_bias",),
-    doc="b = centroidal_bias(q, qd) = dAg qd: central differences",
+    jacobian="{ident}_centroidal_bias_derivatives(q, qd, p, D_b_q, D_b_qd);\n    return 0;",
+    requires=("centroidal_bias", "centroidal_bias_derivatives"),
+    doc="b = centroidal_bias(q, qd) = dAg qd: the Jacobian from centroidal_bias_derivatives",
 )
 
 # --- task space (where the model's C has it): LOCAL_WORLD_ALIGNED, classical accelerations ---
