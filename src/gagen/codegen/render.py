@@ -536,9 +536,11 @@ KERNEL_ARRAYS = {
 # The kernels that run in loops (integrators, stacked inputs): their segment functions are
 # GAGEN_KERNEL, built for CPUs with and without FMA like the unsplit kernels (gagen_math.h).
 # Measured on a 50-link chain: inverse dynamics 2.04 -> 1.54 us and forward dynamics
-# 4.84 -> 3.79 us per call, for 1.8 times their compile time.
+# 4.84 -> 3.79 us per call, for 1.8 times their compile time. The forcing runs in the
+# constrained dynamics (its simulation, stacked states, the C derivatives): with FMA ANYmal
+# C's is 38 kB of code less a quarter, and its constrained forward dynamics 3.19 -> 2.96 us.
 LOOPED_KERNELS = ("inverse_dynamics", "gravity", "position", "velocity", "velocity_aba",
-                  "mass_matrix")
+                  "mass_matrix", "forcing")
 
 
 class _Kernels:
@@ -893,9 +895,13 @@ def generate(eqs: Equations, module_name: str, key: str,
                          cse_seconds=cse.seconds, module_name=module_name, ident=ident)
 
 
-# M = L^T D L is written out (taskspace.c) up to this many eliminations: ANYmal C has 237,
-# Talos 1,000 or so; a 50-link chain 21,000, which stays a loop
-LTDL_UNROLLED = 4000
+# M = L^T D L is written out (taskspace.c) up to this many eliminations; past it, a loop
+# over the tree's parents. The written form's code grows with them (ANYmal C's 237: 20 kB,
+# more than half the CPU's instruction cache), and where it runs (the constrained dynamics,
+# the task-space calls) with other large kernels its instructions come from L2 on every
+# call: ANYmal C's constrained forward dynamics took 3.06 us in C with the loop against
+# 3.19 us written out (CPU time, a loop of single calls)
+LTDL_UNROLLED = 100
 
 
 def ltdl_plan(parents: list[int]) -> list[tuple[int, list[tuple[int, list[int]]]]] | None:
