@@ -926,6 +926,30 @@ def test_the_constraints_a_model_holds_are_bounded(count, axes, message):
     assert "\n" not in str(info.value)
 
 
+def test_impulse_defaults_give_the_checked_arguments_numbers(cache_dir):
+    """impulse_dynamics's defaults (every constraint, no restitution, no damping) skip the
+    compiled runtime's argument checks: the same numbers, bit for bit, as the arguments
+    spelled out (which take them), for one state and stacked ones; the lambdify backend's
+    to round-off; and a restitution or damping that is not 0.0 is still checked."""
+    dyn, ref = fourbar("compiled", cache_dir), fourbar("lambdify", cache_dir)
+    rng = np.random.default_rng(11)
+    qs = np.array([closed_fourbar(a) for a in rng.uniform(-np.pi, np.pi, 3)])
+    vs = rng.normal(size=(3, dyn.nv))
+    for q, v in zip(qs, vs):
+        fast = dyn.impulse_dynamics(q, v)
+        spelled = dyn.impulse_dynamics(q, v, [True], 0, 0)
+        for ours, checked, theirs in zip(fast, spelled, ref.impulse_dynamics(q, v)):
+            np.testing.assert_array_equal(ours, checked)
+            close(ours, theirs, "impulse defaults vs lambdify", rtol=1e-9)
+    for ours, checked in zip(dyn.impulse_dynamics(qs, vs),
+                             dyn.impulse_dynamics(qs, vs, ["closure"], 0, 0)):
+        np.testing.assert_array_equal(ours, checked)
+    with pytest.raises(ValueError, match="restitution must be finite"):
+        dyn.impulse_dynamics(qs[0], vs[0], restitution=float("nan"))
+    with pytest.raises(ValueError, match="damping must be finite"):
+        dyn.impulse_dynamics(qs[0], vs[0], damping=-1.0)
+
+
 def test_the_written_and_the_table_driven_solves_agree(cache_dir, tmp_path, monkeypatch):
     """Up to a size, a model's C writes out each constraint's rows of J L^-1 and each block
     of the Delassus matrix with their coordinates as constants; past it, loops read the same

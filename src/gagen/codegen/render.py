@@ -893,9 +893,14 @@ def generate(eqs: Equations, module_name: str, key: str,
                          cse_seconds=cse.seconds, module_name=module_name, ident=ident)
 
 
-# M = L^T D L is written out (taskspace.c) up to this many eliminations: ANYmal C has 237,
-# Talos 1,000 or so; a 50-link chain 21,000, which stays a loop
-LTDL_UNROLLED = 4000
+# M = L^T D L is written out (taskspace.c) up to this many eliminations; past it, a loop
+# over the tree's parents. The written form's code grows with them (ANYmal C's 237: 20 kB,
+# more than half the CPU's instruction cache), and where it runs (the constrained dynamics,
+# the task-space calls) with other large kernels its instructions come from L2 on every
+# call: the loop is no slower there (ANYmal C's constrained forward dynamics 2.81 us in C
+# against 2.85 us written out, CPU time of a loop of single calls, -mfma), in a twentieth
+# of the code
+LTDL_UNROLLED = 100
 
 
 def ltdl_plan(parents: list[int]) -> list[tuple[int, list[tuple[int, list[int]]]]] | None:
@@ -951,13 +956,19 @@ def constraint_context(info: ModelInfo, parameters: list[str]) -> dict:
             # each constraint's rows of J L^-1, written out up to a size
             "constraint_eliminations": eliminations if size <= CONSTRAINT_UNROLLED else None,
             # and the Delassus matrix's blocks, pair by pair of constraints, up to a count
-            "constraint_blocks_written": (size <= CONSTRAINT_UNROLLED
+            "constraint_blocks_written": (size <= CONSTRAINT_BLOCKS_UNROLLED
                                           and len(table) <= CONSTRAINT_BLOCKS_WRITTEN)}
 
 
 # the rows of J L^-1 are written out per constraint (constraints.c) up to this many
-# multiply-adds over all constraints: ANYmal C's four feet have 432
-CONSTRAINT_UNROLLED = 6000
+# multiply-adds over all constraints; past it, a loop over each path's runs. ANYmal C's four
+# feet have 432: written out, 9 kB of instructions, which with M's, the forcing's and the
+# rows' do not stay in the CPU's instruction cache from one call to the next; the loop
+# took its constrained forward dynamics 2.81 -> 2.68 us in C (CPU time, a loop of single
+# calls, the LTDL factorisation a loop in both)
+CONSTRAINT_UNROLLED = 200
+# the Delassus matrix's blocks are written out up to this size of the rows' eliminations
+CONSTRAINT_BLOCKS_UNROLLED = 6000
 # the blocks of G = Z Y^T are written out per pair of constraints (their common runs as
 # constants: the loops unroll and vectorise) up to this many constraints (136 pairs); the
 # runs read from tables cost ANYmal C's four feet a fifth of the constrained dynamics

@@ -542,7 +542,12 @@ cdef class CompiledModel(_Evaluator):
                          p=None):
         """(qd_plus, impulses) at an impact (Dynamics's documentation)."""
         cdef const gagen_model_api *api = self.api
-        mask, _, r, dmp = self._constraints.impulse_arguments(active, restitution, damping)
+        cdef object mask = None
+        cdef double r = 0.0, dmp = 0.0
+        # the defaults (every constraint, no restitution, no damping) need no checks
+        if not (active is None and type(restitution) is float and restitution == 0.0
+                and type(damping) is float and damping == 0.0):
+            mask, _, r, dmp = self._constraints.impulse_arguments(active, restitution, damping)
         cdef cnp.ndarray a = _state(q, "q", api.nq)
         cdef cnp.ndarray b = _state(qd_minus, "qd_minus", api.nv)
         cdef list keep = None if p is None else []
@@ -559,15 +564,17 @@ cdef class CompiledModel(_Evaluator):
         cdef double *pf = _data(impulses)
         cdef double rr = r, dd = dmp
         cdef Py_ssize_t sa = _step(a), sb = _step(b), i, failed = -1
-        cdef Py_ssize_t count = rows if rows >= 0 else 1
         cdef int nv = api.nv, nr = api.ncrows, code, status = 0
-        with nogil:
-            for i in range(count):
-                code = api.impulse_dynamics(pa_ + i * sa, pb + i * sb, pp, act, rr, dd,
-                                            po + i * nv, pf + i * nr)
-                if code != 0 and failed < 0:
-                    failed = i
-                    status = code
+        if rows < 0:  # one state: releasing the GIL would cost more than the kernel
+            status = api.impulse_dynamics(pa_, pb, pp, act, rr, dd, po, pf)
+        else:
+            with nogil:
+                for i in range(rows):
+                    code = api.impulse_dynamics(pa_ + i * sa, pb + i * sb, pp, act, rr, dd,
+                                                po + i * nv, pf + i * nr)
+                    if code != 0 and failed < 0:
+                        failed = i
+                        status = code
         if status:
             self._constraint_failure(status, failed if rows >= 0 else -1, a, mask, dd, p)
         return out, impulses
