@@ -94,7 +94,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "234c58c37372472c8123a1f970b745da1b3c5d080e7647d5452d744c40900dba") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "485c30c095fe4a4abbec67dbcfc92ba1d201ff524521ed748718d7e7042ca088") < 0) {
         Py_DECREF(module);
         return NULL;
     }
