@@ -94,7 +94,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "4a6a8c3c8f4f0b4978303d26bd46b7da6e503c546de7aca4d84e38b416b3e2e8") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "6b5937e384e935238cced47bbaa60e66c830d7bfab4eefd54d6a483d81a1a293") < 0) {
         Py_DECREF(module);
         return NULL;
     }
