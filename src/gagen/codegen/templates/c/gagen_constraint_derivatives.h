@@ -175,47 +175,78 @@ static void gagen_cd_select(const gagen_cd_model *model, const unsigned char *ac
     set->order = doubles;
 }
 
-/* y -= sum_t coef[t] * (row idx[t] of base, stride apart), over len entries: each block
-   of y's entries is read and written once, its sources' rows summed in registers (a
-   row axpy per source would load and store y once for each). On x86-64 with GCC or
-   clang under glibc, a clone for AVX2 CPUs (chosen when the library loads) runs the same
-   operations in the same order four wide: its results are the default's, bit for bit
-   (no FMA contraction: the target adds no "fma"). GAGEN_NO_CLONES turns it off. */
+/* y -= sum_t coef[t] * base[off[t] ...], over len entries (off[t]: where the source row
+   starts in base): each block of y's entries is read and written once, its sources' rows
+   summed in registers (a row axpy per source would load and store y once for each). The
+   widest blocks hold 24 entries (12 SSE2 or 6 AVX registers: no spill), so a row of 3 nv
+   right-hand sides takes few passes over the sources. On x86-64 with GCC or clang under
+   glibc, a clone for AVX2 CPUs (chosen when the library loads) runs the same operations
+   in the same order four wide: its results are the default's, bit for bit (no FMA
+   contraction: the target adds no "fma"), and a block's width changes no entry's sum.
+   GAGEN_NO_CLONES turns it off. */
+#define GAGEN_CD_LOAD4(o) \
+    double a##o##0 = y[c + 4 * o], a##o##1 = y[c + 4 * o + 1], a##o##2 = y[c + 4 * o + 2], \
+           a##o##3 = y[c + 4 * o + 3]
+#define GAGEN_CD_SUB4(o) \
+    a##o##0 -= w * x[4 * o]; a##o##1 -= w * x[4 * o + 1]; a##o##2 -= w * x[4 * o + 2]; \
+    a##o##3 -= w * x[4 * o + 3]
+#define GAGEN_CD_STORE4(o) \
+    y[c + 4 * o] = a##o##0; y[c + 4 * o + 1] = a##o##1; y[c + 4 * o + 2] = a##o##2; \
+    y[c + 4 * o + 3] = a##o##3
 #if defined(__x86_64__) && defined(__linux__) && (defined(__GNUC__) || defined(__clang__)) \
     && !defined(GAGEN_NO_CLONES)
 __attribute__((target_clones("avx2", "default")))
 #endif
-static void gagen_cd_gather(double *y, const double *base, ptrdiff_t stride, const int *idx,
-                            const double *coef, int count, ptrdiff_t len)
+static void gagen_cd_gather(double *y, const double *base, const int *off, const double *coef,
+                            int count, ptrdiff_t len)
 {
     ptrdiff_t c = 0;
     int t;
     if (count == 0) return;
-    for (; c + 8 <= len; c += 8) {
-        double a0 = y[c], a1 = y[c + 1], a2 = y[c + 2], a3 = y[c + 3];
-        double a4 = y[c + 4], a5 = y[c + 5], a6 = y[c + 6], a7 = y[c + 7];
+    for (; c + 24 <= len; c += 24) {
+        GAGEN_CD_LOAD4(0); GAGEN_CD_LOAD4(1); GAGEN_CD_LOAD4(2);
+        GAGEN_CD_LOAD4(3); GAGEN_CD_LOAD4(4); GAGEN_CD_LOAD4(5);
         for (t = 0; t < count; ++t) {
-            const double *x = base + idx[t] * stride + c, w = coef[t];
-            a0 -= w * x[0]; a1 -= w * x[1]; a2 -= w * x[2]; a3 -= w * x[3];
-            a4 -= w * x[4]; a5 -= w * x[5]; a6 -= w * x[6]; a7 -= w * x[7];
+            const double *x = base + off[t] + c, w = coef[t];
+            GAGEN_CD_SUB4(0); GAGEN_CD_SUB4(1); GAGEN_CD_SUB4(2);
+            GAGEN_CD_SUB4(3); GAGEN_CD_SUB4(4); GAGEN_CD_SUB4(5);
         }
-        y[c] = a0; y[c + 1] = a1; y[c + 2] = a2; y[c + 3] = a3;
-        y[c + 4] = a4; y[c + 5] = a5; y[c + 6] = a6; y[c + 7] = a7;
+        GAGEN_CD_STORE4(0); GAGEN_CD_STORE4(1); GAGEN_CD_STORE4(2);
+        GAGEN_CD_STORE4(3); GAGEN_CD_STORE4(4); GAGEN_CD_STORE4(5);
+    }
+    for (; c + 8 <= len; c += 8) {
+        GAGEN_CD_LOAD4(0); GAGEN_CD_LOAD4(1);
+        for (t = 0; t < count; ++t) {
+            const double *x = base + off[t] + c, w = coef[t];
+            GAGEN_CD_SUB4(0); GAGEN_CD_SUB4(1);
+        }
+        GAGEN_CD_STORE4(0); GAGEN_CD_STORE4(1);
+    }
+    for (; c + 4 <= len; c += 4) {
+        GAGEN_CD_LOAD4(0);
+        for (t = 0; t < count; ++t) {
+            const double *x = base + off[t] + c, w = coef[t];
+            GAGEN_CD_SUB4(0);
+        }
+        GAGEN_CD_STORE4(0);
     }
     for (; c + 2 <= len; c += 2) {
         double a0 = y[c], a1 = y[c + 1];
         for (t = 0; t < count; ++t) {
-            const double *x = base + idx[t] * stride + c, w = coef[t];
+            const double *x = base + off[t] + c, w = coef[t];
             a0 -= w * x[0]; a1 -= w * x[1];
         }
         y[c] = a0; y[c + 1] = a1;
     }
     for (; c < len; ++c) {
         double a0 = y[c];
-        for (t = 0; t < count; ++t) a0 -= coef[t] * base[idx[t] * stride + c];
+        for (t = 0; t < count; ++t) a0 -= coef[t] * base[off[t] + c];
         y[c] = a0;
     }
 }
+#undef GAGEN_CD_LOAD4
+#undef GAGEN_CD_SUB4
+#undef GAGEN_CD_STORE4
 
 static void gagen_cd_cross3(const double *a, const double *b, double *out)
 {
@@ -861,11 +892,11 @@ static void gagen_cd_kkt(const gagen_cd_set *c, const double *L, const double *r
     for (i = n - 1; i >= 0; --i) {  /* w = L^-T r1: w_i = r1_i - sum_{k below i} L_ki w_k */
         count = 0;
         for (t = md->desc_ptr[i]; t < md->desc_ptr[i + 1]; ++t) {
-            idx[count] = md->desc[t];
+            idx[count] = (int)(n3 * md->desc[t]);
             coef[count] = L[n * md->desc[t] + i];
             count += 1;
         }
-        gagen_cd_gather(out + n3 * i, out, n3, idx, coef, count, n3);
+        gagen_cd_gather(out + n3 * i, out, idx, coef, count, n3);
     }
     for (j = 0; j < n; ++j)  /* z = D^-1 w */
         for (k = 0; k < n3; ++k) out[n3 * j + k] *= Dinv[j];
@@ -875,51 +906,51 @@ static void gagen_cd_kkt(const gagen_cd_set *c, const double *L, const double *r
             count = 0;
             for (j = 0; j < n; ++j) {
                 if (Y[n * a + j] != 0.0) {
-                    idx[count] = (int)j;
+                    idx[count] = (int)(n3 * j);
                     coef[count] = Y[n * a + j];
                     count += 1;
                 }
             }
-            gagen_cd_gather(rhs + n3 * a, out, n3, idx, coef, count, n3);
+            gagen_cd_gather(rhs + n3 * a, out, idx, coef, count, n3);
         }
         for (a = 0; a < m; ++a) {  /* dlambda = G^-1 (...), G = Lg Dg Lg^T: forward, Dg^-1, back */
             for (b = 0; b < a; ++b) {
-                idx[b] = (int)b;
+                idx[b] = (int)(n3 * b);
                 coef[b] = G[m * a + b];
             }
-            gagen_cd_gather(rhs + n3 * a, rhs, n3, idx, coef, (int)a, n3);
+            gagen_cd_gather(rhs + n3 * a, rhs, idx, coef, (int)a, n3);
         }
         for (a = m - 1; a >= 0; --a) {
             s = 1.0 / G[m * a + a];
             for (k = 0; k < n3; ++k) rhs[n3 * a + k] *= s;
             count = 0;
             for (b = a + 1; b < m; ++b) {
-                idx[count] = (int)b;
+                idx[count] = (int)(n3 * b);
                 coef[count] = G[m * b + a];
                 count += 1;
             }
-            gagen_cd_gather(rhs + n3 * a, rhs, n3, idx, coef, count, n3);
+            gagen_cd_gather(rhs + n3 * a, rhs, idx, coef, count, n3);
         }
         for (j = 0; j < n; ++j) {  /* z += D^-1 Y^T dlambda */
             count = 0;
             for (a = 0; a < m; ++a) {
                 if (Y[n * a + j] != 0.0) {
-                    idx[count] = (int)a;
+                    idx[count] = (int)(n3 * a);
                     coef[count] = -Y[n * a + j] * Dinv[j];
                     count += 1;
                 }
             }
-            gagen_cd_gather(out + n3 * j, rhs, n3, idx, coef, count, n3);
+            gagen_cd_gather(out + n3 * j, rhs, idx, coef, count, n3);
         }
     }
     for (k = 0; k < n; ++k) {  /* dqdd = L^-1 z: root first, each row from its ancestors */
         count = 0;
         for (i = parent[k]; i >= 0; i = parent[i]) {
-            idx[count] = (int)i;
+            idx[count] = (int)(n3 * i);
             coef[count] = L[n * k + i];
             count += 1;
         }
-        gagen_cd_gather(out + n3 * k, out, n3, idx, coef, count, n3);
+        gagen_cd_gather(out + n3 * k, out, idx, coef, count, n3);
     }
 }
 
