@@ -415,11 +415,13 @@ static void gagen_cd_placements(const gagen_cd_set *c, const double *X, const do
     }
 }
 
-/* the frames' arrays: J (f, 6, nv), P (f, 3), S, dVq, dAq, dAv, dW (f, nv, 6), V, A, W (f, 6) */
+/* the frames' arrays: J (f, 6, nv), P (f, 3), S, dVq, dAq, dAv, dW (f, nv, 6), V, A, W (f, 6);
+   order the set's (f, nv, nv), whose diagonal says which coordinates are on a chain */
 typedef struct {
     ptrdiff_t nv;
     const double *J;
     const double *P;
+    const double *order;
     double *S, *V, *A, *dVq, *dAq, *dAv, *W, *dW;
 } gagen_cd_frames;
 
@@ -584,7 +586,8 @@ static void gagen_cd_row_derivative(const gagen_cd_frames *F, int fa, int fb, in
 }
 
 /* W += sign (f, p x f + t) on frame fchain's chain, p frame fp's origin, and its
-   q-derivative (f and t turn with frame fa's axes when local) */
+   q-derivative (f and t turn with frame fa's axes when local): nonzero only along fp's
+   chain (p moves) and, when local, fa's (the axes turn); dW is zero elsewhere */
 static void gagen_cd_wrench_at(const gagen_cd_frames *F, int fp, int fa, int fchain,
                                double sign, const double *fw, const double *tw, int local)
 {
@@ -598,6 +601,9 @@ static void gagen_cd_wrench_at(const gagen_cd_frames *F, int fp, int fa, int fch
         F->W[6 * fchain + 3 + i] += sign * (m[i] + tw[i]);
     }
     for (k = 0; k < nv; ++k) {
+        if (F->order[(fp * nv + k) * nv + k] == 0.0
+            && !(local && F->order[(fa * nv + k) * nv + k] != 0.0))
+            continue;
         for (i = 0; i < 3; ++i) {
             dp[i] = F->J[(6 * fp + i) * nv + k];
             df[i] = 0.0;
@@ -629,7 +635,9 @@ static void gagen_cd_turn(const double *R, double *x, int blocks)
     }
 }
 
-/* Each frame's chain at qdd = 0 (zeroing S .. W of gagen_cd_state's layout first): S_j (its
+/* Each frame's chain at qdd = 0 (zeroing first what is summed into, dW .. W of
+   gagen_cd_state's layout, and, where a loop or a "local" row reads a frame's S, dVq, dAq
+   or dAv off its chain, those entries; the rest is written before it is read): S_j (its
    twists at the world's origin), V_j (j's body's velocity), Sd_j = V_j x S_j, V, and
    A = sum Sd_j qd_j; then the active rows' J (m, nv) and rhs = -(Jdot qd + kd J qd)
    (gagen_cn_one's rows: a point's velocity, or a frame's twist at A's origin, less B's; in
@@ -646,7 +654,22 @@ static void gagen_cd_motion(const gagen_cd_set *c, const double *J, const double
     double *Sj, *pre = T;
     double tmp[6], x0[6];
     gagen_cd_frames F;
-    memset(S, 0, (size_t)(7 * nf * nv * 6 + 18 * nf) * sizeof(double));
+    int off_chain = 0;
+    memset(S + 6 * nf * nv * 6, 0, (size_t)(nf * nv * 6 + 18 * nf) * sizeof(double));
+    for (cc = 0; cc < c->nc; ++cc)
+        if (c->table[GAGEN_CD_TABLE * cc + 1] >= 0 || c->table[GAGEN_CD_TABLE * cc + 3])
+            off_chain = 1;
+    for (f = 0; off_chain && f < nf; ++f) {  /* S, dVq, dAq, dAv: blocks 0, 3, 4, 5 */
+        for (d = 0; d < nv; ++d) {
+            if (c->order[(f * nv + d) * nv + d] != 0.0) continue;
+            for (h = 0; h < 6; ++h) {
+                S[(f * nv + d) * 6 + h] = 0.0;
+                S[(3 * nf * nv + f * nv + d) * 6 + h] = 0.0;
+                S[(4 * nf * nv + f * nv + d) * 6 + h] = 0.0;
+                S[(5 * nf * nv + f * nv + d) * 6 + h] = 0.0;
+            }
+        }
+    }
     for (f = 0; f < nf; ++f) {
         ch = c->chain + f * nv;
         n = c->chain_len[f];
@@ -680,6 +703,7 @@ static void gagen_cd_motion(const gagen_cd_set *c, const double *J, const double
     F.S = S;
     F.V = V;
     F.A = A;
+    F.order = c->order;
     F.dVq = F.dAq = F.dAv = F.W = F.dW = NULL;
     for (cc = 0; cc < c->nc; ++cc) {
         tb = c->table + GAGEN_CD_TABLE * cc;
@@ -788,6 +812,7 @@ static void gagen_cd_terms(const gagen_cd_set *c, const double *J, const double 
     F.nv = nv;
     F.J = J;
     F.P = P;
+    F.order = c->order;
     F.S = S;
     F.V = V;
     F.A = A;
