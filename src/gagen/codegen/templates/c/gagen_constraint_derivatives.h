@@ -42,9 +42,8 @@
    nf constrained frames, m active rows of nrows declared ones. */
 #define GAGEN_CD_WORKSPACE(nv, nb, nf, m, nrows) \
     ((nv) + ((nrows) > (nv) ? (nrows) : (nv)) + (m) + 3 * (nv) * (nv) + 15 * (nb) \
-     + (nf) * 6 * (nv) + (m) * (nv) + 12 * (nf) + 7 * (nf) * (nv) * 6 + 12 * (nf) \
-     + (nv) * (nv) * 6 + 18 * ((nv) + 1) + (m) * 3 * (nv) + (nv) * (nv) \
-     + ((nv) + (m)) * 3 * (nv) + (m) * (nv) + (m) * (m) + 2 * (nv) + (m))
+     + (nf) * 6 * (nv) + (m) * (nv) + 12 * (nf) + 6 * (nf) * (nv) * 6 + 18 * (nf) \
+     + 18 * ((nv) + 1) + ((nv) + (m)) * 3 * (nv) + (m) * (nv) + (m) * (m) + 2 * (nv) + (m))
 /* ints of one state's workspace */
 #define GAGEN_CD_INTS(nv, m) ((nv) + (m) + 1)
 /* ints and doubles gagen_cd_select may need for an active set's tables */
@@ -175,8 +174,8 @@ static void gagen_cd_select(const gagen_cd_model *model, const unsigned char *ac
     set->order = doubles;
 }
 
-/* y -= sum_t coef[t] * base[off[t] ...], over len entries (off[t]: where the source row
-   starts in base): each block of y's entries is read and written once, its sources' rows
+/* y <- pre y - sum_t coef[t] * base[off[t] ...], over len entries (off[t]: where the source
+   row starts in base; pre 1.0 changes nothing): each block of y's entries is read and written once, its sources' rows
    summed in registers (a row axpy per source would load and store y once for each). The
    widest blocks hold 24 entries (12 SSE2 or 6 AVX registers: no spill), so a row of 3 nv
    right-hand sides takes few passes over the sources. On x86-64 with GCC or clang under
@@ -185,8 +184,8 @@ static void gagen_cd_select(const gagen_cd_model *model, const unsigned char *ac
    contraction: the target adds no "fma"), and a block's width changes no entry's sum.
    GAGEN_NO_CLONES turns it off. */
 #define GAGEN_CD_LOAD4(o) \
-    double a##o##0 = y[c + 4 * o], a##o##1 = y[c + 4 * o + 1], a##o##2 = y[c + 4 * o + 2], \
-           a##o##3 = y[c + 4 * o + 3]
+    double a##o##0 = y[c + 4 * o] * pre, a##o##1 = y[c + 4 * o + 1] * pre, \
+           a##o##2 = y[c + 4 * o + 2] * pre, a##o##3 = y[c + 4 * o + 3] * pre
 #define GAGEN_CD_SUB4(o) \
     a##o##0 -= w * x[4 * o]; a##o##1 -= w * x[4 * o + 1]; a##o##2 -= w * x[4 * o + 2]; \
     a##o##3 -= w * x[4 * o + 3]
@@ -197,12 +196,12 @@ static void gagen_cd_select(const gagen_cd_model *model, const unsigned char *ac
     && !defined(GAGEN_NO_CLONES)
 __attribute__((target_clones("avx2", "default")))
 #endif
-static void gagen_cd_gather(double *y, const double *base, const int *off, const double *coef,
-                            int count, ptrdiff_t len)
+static void gagen_cd_gather(double *y, double pre, const double *base, const int *off,
+                            const double *coef, int count, ptrdiff_t len)
 {
     ptrdiff_t c = 0;
     int t;
-    if (count == 0) return;
+    if (count == 0 && pre == 1.0) return;
     for (; c + 24 <= len; c += 24) {
         GAGEN_CD_LOAD4(0); GAGEN_CD_LOAD4(1); GAGEN_CD_LOAD4(2);
         GAGEN_CD_LOAD4(3); GAGEN_CD_LOAD4(4); GAGEN_CD_LOAD4(5);
@@ -231,7 +230,7 @@ static void gagen_cd_gather(double *y, const double *base, const int *off, const
         GAGEN_CD_STORE4(0);
     }
     for (; c + 2 <= len; c += 2) {
-        double a0 = y[c], a1 = y[c + 1];
+        double a0 = y[c] * pre, a1 = y[c + 1] * pre;
         for (t = 0; t < count; ++t) {
             const double *x = base + off[t] + c, w = coef[t];
             a0 -= w * x[0]; a1 -= w * x[1];
@@ -239,7 +238,7 @@ static void gagen_cd_gather(double *y, const double *base, const int *off, const
         y[c] = a0; y[c + 1] = a1;
     }
     for (; c < len; ++c) {
-        double a0 = y[c];
+        double a0 = y[c] * pre;
         for (t = 0; t < count; ++t) a0 -= coef[t] * base[off[t] + c];
         y[c] = a0;
     }
@@ -635,15 +634,34 @@ static void gagen_cd_turn(const double *R, double *x, int blocks)
     }
 }
 
-/* Each frame's chain at qdd = 0 (zeroing first what is summed into, dW .. W of
-   gagen_cd_state's layout, and, where a loop or a "local" row reads a frame's S, dVq, dAq
-   or dAv off its chain, those entries; the rest is written before it is read): S_j (its
-   twists at the world's origin), V_j (j's body's velocity), Sd_j = V_j x S_j, V, and
+/* Zeroes what gagen_cd_motion and gagen_cd_terms sum into (dW and V, A, W after it, in
+   gagen_cd_state's layout) and, where a loop or a "local" row reads a frame's S, dVq, dAq
+   or dAv off its chain, those entries; the rest is written before it is read. */
+static void gagen_cd_clear(const gagen_cd_set *c, double *S, double *dVq, double *dAq,
+                           double *dAv, double *dW)
+{
+    ptrdiff_t nv = c->model->nv, nf = c->nf, f, d, h, at;
+    int cc, off_chain = 0;
+    memset(dW, 0, (size_t)(nf * nv * 6 + 18 * nf) * sizeof(double));
+    for (cc = 0; cc < c->nc; ++cc)
+        if (c->table[GAGEN_CD_TABLE * cc + 1] >= 0 || c->table[GAGEN_CD_TABLE * cc + 3])
+            off_chain = 1;
+    for (f = 0; off_chain && f < nf; ++f) {
+        for (d = 0; d < nv; ++d) {
+            if (c->order[(f * nv + d) * nv + d] != 0.0) continue;
+            at = (f * nv + d) * 6;
+            for (h = 0; h < 6; ++h) S[at + h] = dVq[at + h] = dAq[at + h] = dAv[at + h] = 0.0;
+        }
+    }
+}
+
+/* Each frame's chain at qdd = 0 (gagen_cd_clear first): S_j (its twists at the world's
+   origin), V_j (j's body's velocity), Sd_j = V_j x S_j, V, and
    A = sum Sd_j qd_j; then the active rows' J (m, nv) and rhs = -(Jdot qd + kd J qd)
    (gagen_cn_one's rows: a point's velocity, or a frame's twist at A's origin, less B's; in
    A's axes for "local"), the right-hand side of the constrained dynamics. */
 static void gagen_cd_motion(const gagen_cd_set *c, const double *J, const double *R,
-                            const double *P, double *S, double *Vb, double *Sd, double *V,
+                            const double *P, double *S, double *Sd, double *V,
                             double *A, double *T, const double *v, double kd, double *Jc,
                             double *rhs)
 {
@@ -652,24 +670,8 @@ static void gagen_cd_motion(const gagen_cd_set *c, const double *J, const double
     int cc, fa, fb, frame6, local, naxes, row = 0;
     const int *ch, *end, *tb;
     double *Sj, *pre = T;
-    double tmp[6], x0[6];
+    double tmp[6], x0[6], Vb[6];
     gagen_cd_frames F;
-    int off_chain = 0;
-    memset(S + 6 * nf * nv * 6, 0, (size_t)(nf * nv * 6 + 18 * nf) * sizeof(double));
-    for (cc = 0; cc < c->nc; ++cc)
-        if (c->table[GAGEN_CD_TABLE * cc + 1] >= 0 || c->table[GAGEN_CD_TABLE * cc + 3])
-            off_chain = 1;
-    for (f = 0; off_chain && f < nf; ++f) {  /* S, dVq, dAq, dAv: blocks 0, 3, 4, 5 */
-        for (d = 0; d < nv; ++d) {
-            if (c->order[(f * nv + d) * nv + d] != 0.0) continue;
-            for (h = 0; h < 6; ++h) {
-                S[(f * nv + d) * 6 + h] = 0.0;
-                S[(3 * nf * nv + f * nv + d) * 6 + h] = 0.0;
-                S[(4 * nf * nv + f * nv + d) * 6 + h] = 0.0;
-                S[(5 * nf * nv + f * nv + d) * 6 + h] = 0.0;
-            }
-        }
-    }
     for (f = 0; f < nf; ++f) {
         ch = c->chain + f * nv;
         n = c->chain_len[f];
@@ -692,8 +694,8 @@ static void gagen_cd_motion(const gagen_cd_set *c, const double *J, const double
         }
         for (jj = 0; jj < n; ++jj) {  /* V_j (its group's end), Sd_j = V_j x S_j, A = sum Sd_j qd_j */
             j = ch[jj];
-            for (h = 0; h < 6; ++h) Vb[(f * nv + j) * 6 + h] = pre[6 * end[jj] + h];
-            gagen_cd_mcross(&Vb[(f * nv + j) * 6], &S[(f * nv + j) * 6], &Sd[(f * nv + j) * 6]);
+            for (h = 0; h < 6; ++h) Vb[h] = pre[6 * end[jj] + h];
+            gagen_cd_mcross(Vb, &S[(f * nv + j) * 6], &Sd[(f * nv + j) * 6]);
             for (h = 0; h < 6; ++h) A[6 * f + h] += Sd[(f * nv + j) * 6 + h] * v[j];
         }
     }
@@ -744,15 +746,15 @@ static void gagen_cd_motion(const gagen_cd_set *c, const double *J, const double
     }
 }
 
-/* r2 = [-da_c/dq | -da_c/dqd | 0] (m, 3 nv) and dJtl += d(J^T lambda)/dq (nv, nv), lambda
-   held (the module docstring of gagen.runtime.constraint_derivatives has the sums) */
+/* r2 = [-da_c/dq | -da_c/dqd | 0] (m rows of 3 nv) and r1 += d(J^T lambda)/dq in its first
+   nv columns (nv rows of 3 nv), lambda held (the module docstring of gagen.runtime.constraint_derivatives has the sums) */
 static void gagen_cd_terms(const gagen_cd_set *c, const double *J, const double *R, double *P,
-                           double *S, double *Vb, double *Sd, double *dVq, double *dAq,
+                           double *S, double *Sd, double *dVq, double *dAq,
                            double *dAv, double *dW, double *V, double *A, double *W, double *T,
                            const double *v, const double *a, const double *lam, double kd,
-                           double *r2, double *dJtl)
+                           double *r2, double *r1)
 {
-    ptrdiff_t nv = c->model->nv, nf = c->nf, n3 = 3 * c->model->nv, m = c->m;
+    ptrdiff_t nv = c->model->nv, nf = c->nf, n3 = 3 * c->model->nv;
     ptrdiff_t f, i, j, k, d, h, n, jj, kk;
     int cc, fa, fb, frame6, local, naxes, row = 0;
     const double *order;
@@ -770,8 +772,6 @@ static void gagen_cd_terms(const gagen_cd_set *c, const double *J, const double 
     double *sv = T + 6 * (nv + 1);    /* (n + 1, 6) suffix sums of S_j qd_j */
     double *sa = sv + 6 * (nv + 1);   /* (n + 1, 6) suffix sums of S_j a_j + Sd_j qd_j */
     gagen_cd_frames F;
-    (void)Vb;
-    memset(r2, 0, (size_t)(m * n3) * sizeof(double));
     for (f = 0; f < nf; ++f) {
         ch = c->chain + f * nv;
         n = c->chain_len[f];
@@ -832,8 +832,11 @@ static void gagen_cd_terms(const gagen_cd_set *c, const double *J, const double 
         for (d = 0; d < 2 * nv; ++d) {
             k = d < nv ? d : d - nv;
             if (c->order[(fa * nv + k) * nv + k] == 0.0
-                && (fb < 0 || c->order[(fb * nv + k) * nv + k] == 0.0))
-                continue;  /* a coordinate on neither frame's chain moves neither: r2 stays 0 */
+                && (fb < 0 || c->order[(fb * nv + k) * nv + k] == 0.0)) {
+                /* a coordinate on neither frame's chain moves neither */
+                for (i = 0; i < naxes; ++i) r2[(row + i) * n3 + d] = 0.0;
+                continue;
+            }
             gagen_cd_row_derivative(&F, fa, fb, frame6, local, kd, d, dx);
             if (local) {  /* R^T (dx - w x x0) per 3-block */
                 for (h = 0; h < (frame6 ? 2 : 1); ++h) {
@@ -847,6 +850,8 @@ static void gagen_cd_terms(const gagen_cd_set *c, const double *J, const double 
             }
             for (i = 0; i < naxes; ++i) r2[(row + i) * n3 + d] = -dx[tb[5 + i]];
         }
+        for (i = 0; i < naxes; ++i)  /* tau moves no row */
+            for (d = 2 * nv; d < n3; ++d) r2[(row + i) * n3 + d] = 0.0;
         /* the wrench: f, t in world axes, on A at pA (and -W on B at pB or pA) */
         for (i = 0; i < 6; ++i) full[i] = 0.0;
         for (i = 0; i < naxes; ++i) full[tb[5 + i]] = lam[row + i];
@@ -879,7 +884,7 @@ static void gagen_cd_terms(const gagen_cd_set *c, const double *J, const double 
                 j = ch[jj];
                 if (order[k * nv + j] != 0.0) {
                     Sj = S + (f * nv + j) * 6;
-                    dJtl[j * nv + k] -= Sj[0] * u[0] + Sj[1] * u[1] + Sj[2] * u[2]
+                    r1[j * n3 + k] -= Sj[0] * u[0] + Sj[1] * u[1] + Sj[2] * u[2]
                                         + Sj[3] * u[3] + Sj[4] * u[4] + Sj[5] * u[5];
                 }
             }
@@ -891,28 +896,27 @@ static void gagen_cd_terms(const gagen_cd_set *c, const double *J, const double 
                 continue;  /* (k on no chain that the frame's wrenches turn or move with) */
             for (jj = 0; jj < n; ++jj) {
                 Sj = S + (f * nv + ch[jj]) * 6;
-                dJtl[ch[jj] * nv + k] += Sj[0] * e1[0] + Sj[1] * e1[1] + Sj[2] * e1[2]
+                r1[ch[jj] * n3 + k] += Sj[0] * e1[0] + Sj[1] * e1[1] + Sj[2] * e1[2]
                                          + Sj[3] * e1[3] + Sj[4] * e1[4] + Sj[5] * e1[5];
             }
         }
     }
 }
 
-/* [dqdd; dlambda] in out ((nv + m) rows of 3 nv) from r1 in its first nv rows and r2,
-   through M = L^T D L and G = J M^-1 J^T (+ damping I) = Lg Dg Lg^T as gagen_cd_state
-   factored them, with Y = J L^-1: w = L^-T r1, z = D^-1 w; dlambda = G^-1 (r2 - Y z);
-   dqdd = L^-1 (z + D^-1 Y^T dlambda). Each row of out is written once per step from the
-   rows it needs (gagen_cd_gather), along the tree's ancestors and descendants and the
-   rows' paths only. */
-static void gagen_cd_kkt(const gagen_cd_set *c, const double *L, const double *r2, double *out,
-                         const double *Y, const double *G, const double *Dinv, double *coef,
-                         int *idx)
+/* [dqdd; dlambda] in out ((nv + m) rows of 3 nv) from r1 in its first nv rows and r2 in
+   the others, through M = L^T D L and G = J M^-1 J^T (+ damping I) = Lg Dg Lg^T as
+   gagen_cd_state factored them, with Y = J L^-1: w = L^-T r1; dlambda = G^-1 (r2 - Y D^-1 w);
+   dqdd = L^-1 D^-1 (w + Y^T dlambda). Each row of out is written once per step from the
+   rows it needs (gagen_cd_gather, which also scales the row it writes: D^-1 and Dg^-1 take
+   no pass of their own), along the tree's ancestors and descendants and the rows' paths
+   only. Offsets into out are ints: (nv + m) 3 nv < 2^31. */
+static void gagen_cd_kkt(const gagen_cd_set *c, const double *L, double *out, const double *Y,
+                         const double *G, const double *Dinv, double *coef, int *idx)
 {
     const gagen_cd_model *md = c->model;
     ptrdiff_t n = md->nv, m = c->m, n3 = 3 * md->nv, i, j, k, a, b;
     const int *parent = md->parent;
     int t, count;
-    double s;
     double *rhs = out + n3 * n;
     for (i = n - 1; i >= 0; --i) {  /* w = L^-T r1: w_i = r1_i - sum_{k below i} L_ki w_k */
         count = 0;
@@ -921,52 +925,45 @@ static void gagen_cd_kkt(const gagen_cd_set *c, const double *L, const double *r
             coef[count] = L[n * md->desc[t] + i];
             count += 1;
         }
-        gagen_cd_gather(out + n3 * i, out, idx, coef, count, n3);
+        gagen_cd_gather(out + n3 * i, 1.0, out, idx, coef, count, n3);
     }
-    for (j = 0; j < n; ++j)  /* z = D^-1 w */
-        for (k = 0; k < n3; ++k) out[n3 * j + k] *= Dinv[j];
-    if (m) {
-        for (a = 0; a < m; ++a) {  /* r2 - Y z, into out's last m rows */
-            for (k = 0; k < n3; ++k) rhs[n3 * a + k] = r2[n3 * a + k];
-            count = 0;
-            for (j = 0; j < n; ++j) {
-                if (Y[n * a + j] != 0.0) {
-                    idx[count] = (int)(n3 * j);
-                    coef[count] = Y[n * a + j];
-                    count += 1;
-                }
-            }
-            gagen_cd_gather(rhs + n3 * a, out, idx, coef, count, n3);
-        }
-        for (a = 0; a < m; ++a) {  /* dlambda = G^-1 (...), G = Lg Dg Lg^T: forward, Dg^-1, back */
-            for (b = 0; b < a; ++b) {
-                idx[b] = (int)(n3 * b);
-                coef[b] = G[m * a + b];
-            }
-            gagen_cd_gather(rhs + n3 * a, rhs, idx, coef, (int)a, n3);
-        }
-        for (a = m - 1; a >= 0; --a) {
-            s = 1.0 / G[m * a + a];
-            for (k = 0; k < n3; ++k) rhs[n3 * a + k] *= s;
-            count = 0;
-            for (b = a + 1; b < m; ++b) {
-                idx[count] = (int)(n3 * b);
-                coef[count] = G[m * b + a];
+    for (a = 0; a < m; ++a) {  /* r2 - Y D^-1 w, in place */
+        count = 0;
+        for (j = 0; j < n; ++j) {
+            if (Y[n * a + j] != 0.0) {
+                idx[count] = (int)(n3 * j);
+                coef[count] = Y[n * a + j] * Dinv[j];
                 count += 1;
             }
-            gagen_cd_gather(rhs + n3 * a, rhs, idx, coef, count, n3);
         }
-        for (j = 0; j < n; ++j) {  /* z += D^-1 Y^T dlambda */
-            count = 0;
-            for (a = 0; a < m; ++a) {
-                if (Y[n * a + j] != 0.0) {
-                    idx[count] = (int)(n3 * a);
-                    coef[count] = -Y[n * a + j] * Dinv[j];
-                    count += 1;
-                }
+        gagen_cd_gather(rhs + n3 * a, 1.0, out, idx, coef, count, n3);
+    }
+    for (a = 0; a < m; ++a) {  /* dlambda = G^-1 (...), G = Lg Dg Lg^T: forward, Dg^-1, back */
+        for (b = 0; b < a; ++b) {
+            idx[b] = (int)(n3 * b);
+            coef[b] = G[m * a + b];
+        }
+        gagen_cd_gather(rhs + n3 * a, 1.0, rhs, idx, coef, (int)a, n3);
+    }
+    for (a = m - 1; a >= 0; --a) {
+        count = 0;
+        for (b = a + 1; b < m; ++b) {
+            idx[count] = (int)(n3 * b);
+            coef[count] = G[m * b + a];
+            count += 1;
+        }
+        gagen_cd_gather(rhs + n3 * a, 1.0 / G[m * a + a], rhs, idx, coef, count, n3);
+    }
+    for (j = 0; j < n; ++j) {  /* z = D^-1 w + D^-1 Y^T dlambda */
+        count = 0;
+        for (a = 0; a < m; ++a) {
+            if (Y[n * a + j] != 0.0) {
+                idx[count] = (int)(n3 * a);
+                coef[count] = -Y[n * a + j] * Dinv[j];
+                count += 1;
             }
-            gagen_cd_gather(out + n3 * j, rhs, idx, coef, count, n3);
         }
+        gagen_cd_gather(out + n3 * j, Dinv[j], rhs, idx, coef, count, n3);
     }
     for (k = 0; k < n; ++k) {  /* dqdd = L^-1 z: root first, each row from its ancestors */
         count = 0;
@@ -975,7 +972,7 @@ static void gagen_cd_kkt(const gagen_cd_set *c, const double *L, const double *r
             coef[count] = L[n * k + i];
             count += 1;
         }
-        gagen_cd_gather(out + n3 * k, out, idx, coef, count, n3);
+        gagen_cd_gather(out + n3 * k, 1.0, out, idx, coef, count, n3);
     }
 }
 
@@ -996,8 +993,8 @@ static int gagen_cd_state(const gagen_cd_set *c, const double *q, const double *
     int rc;
     double n2;
     const double *x;
-    double *qdd, *forces, *lam, *dIq, *dIv, *L, *X, *J, *Jc, *P, *Rf, *S, *Vb, *Sd, *dVq, *dAq;
-    double *dAv, *dW, *V, *A, *W, *T, *r2, *dJtl, *out, *Y, *G, *Dinv;
+    double *qdd, *forces, *lam, *dIq, *dIv, *L, *X, *J, *Jc, *P, *Rf, *S, *Sd, *dVq, *dAq;
+    double *dAv, *dW, *V, *A, *W, *T, *out, *Y, *G, *Dinv;
     for (k = 0; k < md->nquat; ++k) {  /* as the runtime's check: a squared norm that is a
                                           normal double */
         x = q + md->quat[k];
@@ -1017,8 +1014,7 @@ static int gagen_cd_state(const gagen_cd_set *c, const double *q, const double *
     P = Jc + m * n;
     Rf = P + 3 * nf;
     S = Rf + 9 * nf;
-    Vb = S + nf * n * 6;
-    Sd = Vb + nf * n * 6;
+    Sd = S + nf * n * 6;
     dVq = Sd + nf * n * 6;
     dAq = dVq + nf * n * 6;
     dAv = dAq + nf * n * 6;
@@ -1026,10 +1022,8 @@ static int gagen_cd_state(const gagen_cd_set *c, const double *q, const double *
     V = dW + nf * n * 6;
     A = V + 6 * nf;
     W = A + 6 * nf;
-    T = W + 6 * nf;  /* 6 nf: V, A, W; 12 f counted for them and P, R's 12 f */
-    r2 = T + n * n * 6 + 18 * (n + 1);
-    dJtl = r2 + m * n3;
-    out = dJtl + n * n;
+    T = W + 6 * nf;
+    out = T + 18 * (n + 1);
     Y = out + (n + m) * n3;
     G = Y + m * n;
     Dinv = G + m * m;
@@ -1047,7 +1041,8 @@ static int gagen_cd_state(const gagen_cd_set *c, const double *q, const double *
         rc = md->frame_jacobians(q, p, (int)nf, c->frames, GAGEN_CD_WORLD_ALIGNED, J);
         if (rc != 0) return rc;
         gagen_cd_placements(c, X, Fo, Rf, P);
-        gagen_cd_motion(c, J, Rf, P, S, Vb, Sd, V, A, T, qd, kd, Jc, lam);
+        gagen_cd_clear(c, S, dVq, dAq, dAv, dW);
+        gagen_cd_motion(c, J, Rf, P, S, Sd, V, A, T, qd, kd, Jc, lam);
     }
     if (m) {
         for (r = 0; r < m; ++r) {  /* Y's rows: L^-T of J's */
@@ -1070,39 +1065,38 @@ static int gagen_cd_state(const gagen_cd_set *c, const double *q, const double *
     for (j = 0; j < n; ++j) qdd[j] = forces[j];
     gagen_cd_forward(L, md->parent, n, qdd);
     md->inverse_dynamics_derivatives(q, qd, qdd, p, dIq, dIv);
-    memset(dJtl, 0, (size_t)(n * n) * sizeof(double));
-    if (nf)
-        gagen_cd_terms(c, J, Rf, P, S, Vb, Sd, dVq, dAq, dAv, dW, V, A, W, T, qd, qdd, lam, kd,
-                       r2, dJtl);
-    /* r1 = [d(J^T lambda)/dq - dID/dq | -dID/dqd | I] */
+    /* r1 = [d(J^T lambda)/dq - dID/dq | -dID/dqd | I] in out's first nv rows (terms adds
+       the first), r2 in its last m */
     for (i = 0; i < n; ++i) {
         for (j = 0; j < n; ++j) {
-            out[n3 * i + j] = dJtl[n * i + j] - dIq[n * i + j];
+            out[n3 * i + j] = -dIq[n * i + j];
             out[n3 * i + n + j] = -dIv[n * i + j];
             out[n3 * i + 2 * n + j] = 0.0;
         }
         out[n3 * i + 2 * n + i] = 1.0;
     }
-    gagen_cd_kkt(c, L, r2, out, Y, G, Dinv, Dinv + n, ints);
-    /* the outputs: qdd's three blocks; the forces' over every declared row (inactive: 0) */
+    if (nf)
+        gagen_cd_terms(c, J, Rf, P, S, Sd, dVq, dAq, dAv, dW, V, A, W, T, qd, qdd, lam, kd,
+                       out + n3 * n, out);
+    gagen_cd_kkt(c, L, out, Y, G, Dinv, Dinv + n, ints);
+    /* the outputs: qdd's three blocks; the forces' over every declared row (inactive: 0;
+       c->rows is increasing) */
     for (i = 0; i < n; ++i) {
-        for (j = 0; j < n; ++j) {
-            o0[n * i + j] = out[n3 * i + j];
-            o1[n * i + j] = out[n3 * i + n + j];
-            o2[n * i + j] = out[n3 * i + 2 * n + j];
-        }
+        memcpy(o0 + n * i, out + n3 * i, (size_t)n * sizeof(double));
+        memcpy(o1 + n * i, out + n3 * i + n, (size_t)n * sizeof(double));
+        memcpy(o2 + n * i, out + n3 * i + 2 * n, (size_t)n * sizeof(double));
     }
-    if (R) {
-        memset(o3, 0, (size_t)(R * n) * sizeof(double));
-        memset(o4, 0, (size_t)(R * n) * sizeof(double));
-        memset(o5, 0, (size_t)(R * n) * sizeof(double));
-    }
-    for (r = 0; r < m; ++r) {
-        k = c->rows[r];
-        for (j = 0; j < n; ++j) {
-            o3[n * k + j] = out[n3 * (n + r) + j];
-            o4[n * k + j] = out[n3 * (n + r) + n + j];
-            o5[n * k + j] = out[n3 * (n + r) + 2 * n + j];
+    for (k = 0, r = 0; k < R; ++k) {
+        if (r < m && c->rows[r] == k) {
+            x = out + n3 * (n + r);
+            memcpy(o3 + n * k, x, (size_t)n * sizeof(double));
+            memcpy(o4 + n * k, x + n, (size_t)n * sizeof(double));
+            memcpy(o5 + n * k, x + 2 * n, (size_t)n * sizeof(double));
+            r += 1;
+        } else {
+            memset(o3 + n * k, 0, (size_t)n * sizeof(double));
+            memset(o4 + n * k, 0, (size_t)n * sizeof(double));
+            memset(o5 + n * k, 0, (size_t)n * sizeof(double));
         }
     }
     return 0;
