@@ -42,7 +42,7 @@
    nf constrained frames, m active rows of nrows declared ones. */
 #define GAGEN_CD_WORKSPACE(nv, nb, nf, m, nrows) \
     ((nv) + ((nrows) > (nv) ? (nrows) : (nv)) + (m) + 3 * (nv) * (nv) + 15 * (nb) \
-     + (nf) * 6 * (nv) + (m) * (nv) + 12 * (nf) + 6 * (nf) * (nv) * 6 + 18 * (nf) \
+     + (nf) * 6 * (nv) + 12 * (nf) + 6 * (nf) * (nv) * 6 + 18 * (nf) \
      + 18 * ((nv) + 1) + ((nv) + (m)) * 3 * (nv) + (m) * (nv) + (m) * (m) + 2 * (nv) + (m))
 /* ints of one state's workspace */
 #define GAGEN_CD_INTS(nv, m) ((nv) + (m) + 1)
@@ -337,22 +337,32 @@ static void gagen_cd_forward(const double *L, const int *parent, ptrdiff_t n, do
     }
 }
 
-/* G = Y D^-1 Y^T + damping I factored in place as Lg Dg Lg^T (Lg's unit lower triangle
-   below the diagonal, Dg on it); -1 at a pivot not above GAGEN_TS_PIVOT (1e-11) times its
-   diagonal entry (the model's constrained dynamics then answers with its error). */
-static int gagen_cd_delassus(const double *Y, const double *Dinv, ptrdiff_t n, ptrdiff_t m,
-                             double damping, double *G)
+/* G = Y D^-1 Y^T + damping I (Yt = Y^T, nv rows of m) factored in place as Lg Dg Lg^T
+   (Lg's unit lower triangle below the diagonal, Dg on it); -1 at a pivot not above
+   GAGEN_TS_PIVOT (1e-11) times its diagonal entry (the model's constrained dynamics then
+   answers with its error). G's lower triangle is summed over the coordinates j in order,
+   each adding Y_aj D^-1_j Y_bj for the rows a, b that coordinate moves (its nonzeros in
+   nz): the same sums as the dot products of Y's rows, without their zeros and without
+   one long chain of additions per entry. */
+static int gagen_cd_delassus(const double *Yt, const double *Dinv, ptrdiff_t n, ptrdiff_t m,
+                             double damping, double *G, int *nz)
 {
     ptrdiff_t a, b, j, k;
-    double s, d, diag;
-    for (a = 0; a < m; ++a) {
-        for (b = 0; b <= a; ++b) {
-            s = 0.0;
-            for (j = 0; j < n; ++j) s += Y[n * a + j] * Dinv[j] * Y[n * b + j];
-            G[m * a + b] = s;
+    int count, t, u;
+    double s, d, diag, ya;
+    for (a = 0; a < m; ++a)
+        for (b = 0; b <= a; ++b) G[m * a + b] = 0.0;
+    for (j = 0; j < n; ++j) {
+        count = 0;
+        for (a = 0; a < m; ++a)
+            if (Yt[m * j + a] != 0.0) nz[count++] = (int)a;
+        for (t = 0; t < count; ++t) {
+            a = nz[t];
+            ya = Yt[m * j + a] * Dinv[j];
+            for (u = 0; u <= t; ++u) G[m * a + nz[u]] += ya * Yt[m * j + nz[u]];
         }
-        G[m * a + a] += damping;
     }
+    for (a = 0; a < m; ++a) G[m * a + a] += damping;
     for (j = 0; j < m; ++j) {  /* the lower triangle, column by column (gagen_cn_kkt's steps) */
         diag = G[m * j + j];
         d = diag;
@@ -657,15 +667,15 @@ static void gagen_cd_clear(const gagen_cd_set *c, double *S, double *dVq, double
 
 /* Each frame's chain at qdd = 0 (gagen_cd_clear first): S_j (its twists at the world's
    origin), V_j (j's body's velocity), Sd_j = V_j x S_j, V, and
-   A = sum Sd_j qd_j; then the active rows' J (m, nv) and rhs = -(Jdot qd + kd J qd)
+   A = sum Sd_j qd_j; then the active rows' J, as Jt = J^T (nv rows of m), and rhs = -(Jdot qd + kd J qd)
    (gagen_cn_one's rows: a point's velocity, or a frame's twist at A's origin, less B's; in
    A's axes for "local"), the right-hand side of the constrained dynamics. */
 static void gagen_cd_motion(const gagen_cd_set *c, const double *J, const double *R,
                             const double *P, double *S, double *Sd, double *V,
-                            double *A, double *T, const double *v, double kd, double *Jc,
+                            double *A, double *T, const double *v, double kd, double *Jt,
                             double *rhs)
 {
-    ptrdiff_t nv = c->model->nv, nf = c->nf;
+    ptrdiff_t nv = c->model->nv, nf = c->nf, m = c->m;
     ptrdiff_t f, i, j, h, n, jj, d;
     int cc, fa, fb, frame6, local, naxes, row = 0;
     const int *ch, *end, *tb;
@@ -720,7 +730,7 @@ static void gagen_cd_motion(const gagen_cd_set *c, const double *J, const double
         for (d = 0; d < nv; ++d) {
             if (c->order[(fa * nv + d) * nv + d] == 0.0
                 && (fb < 0 || c->order[(fb * nv + d) * nv + d] == 0.0)) {
-                for (i = 0; i < naxes; ++i) Jc[(row + i) * nv + d] = 0.0;
+                for (i = 0; i < naxes; ++i) Jt[d * m + row + i] = 0.0;
                 continue;
             }
             Sj = S + (fa * nv + d) * 6;
@@ -740,7 +750,7 @@ static void gagen_cd_motion(const gagen_cd_set *c, const double *J, const double
                 gagen_cd_add_cross(x0 + 3, &P[3 * fa], 1.0, x0);
             }
             if (local) gagen_cd_turn(R + 9 * fa, x0, frame6 ? 2 : 1);
-            for (i = 0; i < naxes; ++i) Jc[(row + i) * nv + d] = x0[tb[5 + i]];
+            for (i = 0; i < naxes; ++i) Jt[d * m + row + i] = x0[tb[5 + i]];
         }
         row += naxes;
     }
@@ -909,8 +919,8 @@ static void gagen_cd_terms(const gagen_cd_set *c, const double *J, const double 
    dqdd = L^-1 D^-1 (w + Y^T dlambda). Each row of out is written once per step from the
    rows it needs (gagen_cd_gather, which also scales the row it writes: D^-1 and Dg^-1 take
    no pass of their own), along the tree's ancestors and descendants and the rows' paths
-   only. Offsets into out are ints: (nv + m) 3 nv < 2^31. */
-static void gagen_cd_kkt(const gagen_cd_set *c, const double *L, double *out, const double *Y,
+   only (Yt = Y^T, nv rows of m). Offsets into out are ints: (nv + m) 3 nv < 2^31. */
+static void gagen_cd_kkt(const gagen_cd_set *c, const double *L, double *out, const double *Yt,
                          const double *G, const double *Dinv, double *coef, int *idx)
 {
     const gagen_cd_model *md = c->model;
@@ -930,9 +940,9 @@ static void gagen_cd_kkt(const gagen_cd_set *c, const double *L, double *out, co
     for (a = 0; a < m; ++a) {  /* r2 - Y D^-1 w, in place */
         count = 0;
         for (j = 0; j < n; ++j) {
-            if (Y[n * a + j] != 0.0) {
+            if (Yt[m * j + a] != 0.0) {
                 idx[count] = (int)(n3 * j);
-                coef[count] = Y[n * a + j] * Dinv[j];
+                coef[count] = Yt[m * j + a] * Dinv[j];
                 count += 1;
             }
         }
@@ -957,9 +967,9 @@ static void gagen_cd_kkt(const gagen_cd_set *c, const double *L, double *out, co
     for (j = 0; j < n; ++j) {  /* z = D^-1 w + D^-1 Y^T dlambda */
         count = 0;
         for (a = 0; a < m; ++a) {
-            if (Y[n * a + j] != 0.0) {
+            if (Yt[m * j + a] != 0.0) {
                 idx[count] = (int)(n3 * a);
-                coef[count] = -Y[n * a + j] * Dinv[j];
+                coef[count] = -Yt[m * j + a] * Dinv[j];
                 count += 1;
             }
         }
@@ -993,8 +1003,9 @@ static int gagen_cd_state(const gagen_cd_set *c, const double *q, const double *
     int rc;
     double n2;
     const double *x;
-    double *qdd, *forces, *lam, *dIq, *dIv, *L, *X, *J, *Jc, *P, *Rf, *S, *Sd, *dVq, *dAq;
-    double *dAv, *dW, *V, *A, *W, *T, *out, *Y, *G, *Dinv;
+    double *qdd, *forces, *lam, *dIq, *dIv, *L, *X, *J, *P, *Rf, *S, *Sd, *dVq, *dAq;
+    double *dAv, *dW, *V, *A, *W, *T, *out, *Yt, *G, *Dinv;
+    int t, count;
     for (k = 0; k < md->nquat; ++k) {  /* as the runtime's check: a squared norm that is a
                                           normal double */
         x = q + md->quat[k];
@@ -1010,8 +1021,7 @@ static int gagen_cd_state(const gagen_cd_set *c, const double *q, const double *
     L = dIv + n * n;
     X = L + n * n;
     J = X + 15 * md->nb;
-    Jc = J + nf * 6 * n;
-    P = Jc + m * n;
+    P = J + nf * 6 * n;
     Rf = P + 3 * nf;
     S = Rf + 9 * nf;
     Sd = S + nf * n * 6;
@@ -1024,8 +1034,8 @@ static int gagen_cd_state(const gagen_cd_set *c, const double *q, const double *
     W = A + 6 * nf;
     T = W + 6 * nf;
     out = T + 18 * (n + 1);
-    Y = out + (n + m) * n3;
-    G = Y + m * n;
+    Yt = out + (n + m) * n3;
+    G = Yt + m * n;
     Dinv = G + m * m;
     /* the constrained forward dynamics (the model's constrained_forward_dynamics: the same
        steps, on factors the derivatives reuse): M = L^T D L, f = L^-T (tau - bias),
@@ -1042,21 +1052,29 @@ static int gagen_cd_state(const gagen_cd_set *c, const double *q, const double *
         if (rc != 0) return rc;
         gagen_cd_placements(c, X, Fo, Rf, P);
         gagen_cd_clear(c, S, dVq, dAq, dAv, dW);
-        gagen_cd_motion(c, J, Rf, P, S, Sd, V, A, T, qd, kd, Jc, lam);
+        gagen_cd_motion(c, J, Rf, P, S, Sd, V, A, T, qd, kd, Yt, lam);
     }
     if (m) {
-        for (r = 0; r < m; ++r) {  /* Y's rows: L^-T of J's */
-            for (j = 0; j < n; ++j) Y[n * r + j] = Jc[n * r + j];
-            gagen_cd_back(L, md->parent, n, Y + n * r);
+        for (i = n - 1; i >= 0; --i) {  /* Y^T = L^-T J^T in place (gagen_cd_back's steps,
+                                           all rows at once) */
+            count = 0;
+            for (t = md->desc_ptr[i + 1] - 1; t >= md->desc_ptr[i]; --t) {
+                ints[count] = (int)(m * md->desc[t]);
+                Dinv[n + count] = L[n * md->desc[t] + i];
+                count += 1;
+            }
+            gagen_cd_gather(Yt + m * i, 1.0, Yt, ints, Dinv + n, count, m);
+        }
+        for (r = 0; r < m; ++r) {
             n2 = 0.0;
-            for (j = 0; j < n; ++j) n2 += Y[n * r + j] * Dinv[j] * qdd[j];
+            for (j = 0; j < n; ++j) n2 += Yt[m * j + r] * Dinv[j] * qdd[j];
             lam[r] -= n2;
         }
-        if (gagen_cd_delassus(Y, Dinv, n, m, damping, G)) return GAGEN_CD_SINGULAR;
+        if (gagen_cd_delassus(Yt, Dinv, n, m, damping, G, ints)) return GAGEN_CD_SINGULAR;
         gagen_cd_solve_ldlt(G, m, lam);
         for (j = 0; j < n; ++j) {
             n2 = qdd[j];
-            for (r = 0; r < m; ++r) n2 += Y[n * r + j] * lam[r];
+            for (r = 0; r < m; ++r) n2 += Yt[m * j + r] * lam[r];
             forces[j] = n2 * Dinv[j];  /* (forces: scratch here) */
         }
     } else {
@@ -1078,7 +1096,7 @@ static int gagen_cd_state(const gagen_cd_set *c, const double *q, const double *
     if (nf)
         gagen_cd_terms(c, J, Rf, P, S, Sd, dVq, dAq, dAv, dW, V, A, W, T, qd, qdd, lam, kd,
                        out + n3 * n, out);
-    gagen_cd_kkt(c, L, out, Y, G, Dinv, Dinv + n, ints);
+    gagen_cd_kkt(c, L, out, Yt, G, Dinv, Dinv + n, ints);
     /* the outputs: qdd's three blocks; the forces' over every declared row (inactive: 0;
        c->rows is increasing) */
     for (i = 0; i < n; ++i) {
