@@ -247,7 +247,15 @@ static void gagen_cd_gather(double *y, double pre, const double *base, const int
 #undef GAGEN_CD_SUB4
 #undef GAGEN_CD_STORE4
 
-static void gagen_cd_cross3(const double *a, const double *b, double *out)
+/* the small vector helpers and a row's derivative are inlined where they are used, so
+   their 3- and 6-vectors stay in registers */
+#if defined(__GNUC__) || defined(__clang__)
+#define GAGEN_CD_INLINE static inline __attribute__((always_inline))
+#else
+#define GAGEN_CD_INLINE static inline
+#endif
+
+GAGEN_CD_INLINE void gagen_cd_cross3(const double *a, const double *b, double *out)
 {
     double x = a[1] * b[2] - a[2] * b[1];
     double y = a[2] * b[0] - a[0] * b[2];
@@ -258,7 +266,7 @@ static void gagen_cd_cross3(const double *a, const double *b, double *out)
 }
 
 /* the spatial cross product of twists a x b (linear first) */
-static void gagen_cd_mcross(const double *a, const double *b, double *out)
+GAGEN_CD_INLINE void gagen_cd_mcross(const double *a, const double *b, double *out)
 {
     double t1[3], t2[3], t3[3];
     int i;
@@ -273,7 +281,7 @@ static void gagen_cd_mcross(const double *a, const double *b, double *out)
 
 /* the dual cross product a x* f of a twist and a wrench (linear first):
    (a_w x f_l, a_w x f_t + a_l x f_l) */
-static void gagen_cd_fcross(const double *a, const double *f, double *out)
+GAGEN_CD_INLINE void gagen_cd_fcross(const double *a, const double *f, double *out)
 {
     double t1[3], t2[3], t3[3];
     int i;
@@ -287,7 +295,7 @@ static void gagen_cd_fcross(const double *a, const double *f, double *out)
 }
 
 /* out += scale (a x b) */
-static void gagen_cd_add_cross(const double *a, const double *b, double scale, double *out)
+GAGEN_CD_INLINE void gagen_cd_add_cross(const double *a, const double *b, double scale, double *out)
 {
     double t[3];
     gagen_cd_cross3(a, b, t);
@@ -435,13 +443,13 @@ typedef struct {
 } gagen_cd_frames;
 
 /* row k of frame f's (nv, 6) block of base */
-static double *gagen_cd_col(const gagen_cd_frames *F, double *base, int f, ptrdiff_t k)
+GAGEN_CD_INLINE double *gagen_cd_col(const gagen_cd_frames *F, double *base, int f, ptrdiff_t k)
 {
     return base + (f * F->nv + k) * 6;
 }
 
 /* the classical acceleration and the velocity of point p (V, A at the origin) */
-static void gagen_cd_classical(const double *V, const double *A, const double *p, double *acc,
+GAGEN_CD_INLINE void gagen_cd_classical(const double *V, const double *A, const double *p, double *acc,
                                double *vel)
 {
     int i;
@@ -484,7 +492,7 @@ static void gagen_cd_row_value(const gagen_cd_frames *F, int fa, int fb, int fra
     gagen_cd_add_cross(&x[3], &F->P[3 * fa], 1.0, x);  /* at pA: lin + ang x p */
 }
 
-static void gagen_cd_motion_derivative(const gagen_cd_frames *F, int f, ptrdiff_t d, double *dV,
+GAGEN_CD_INLINE void gagen_cd_motion_derivative(const gagen_cd_frames *F, int f, ptrdiff_t d, double *dV,
                                        double *dA)
 {
     int i;
@@ -502,7 +510,7 @@ static void gagen_cd_motion_derivative(const gagen_cd_frames *F, int f, ptrdiff_
     }
 }
 
-static void gagen_cd_velocity_derivative(const gagen_cd_frames *F, int f, ptrdiff_t d,
+GAGEN_CD_INLINE void gagen_cd_velocity_derivative(const gagen_cd_frames *F, int f, ptrdiff_t d,
                                          double *dV)
 {
     int i;
@@ -512,7 +520,7 @@ static void gagen_cd_velocity_derivative(const gagen_cd_frames *F, int f, ptrdif
 }
 
 /* the angular part of a frame row's value (at the origin), for its shift's derivative */
-static void gagen_cd_value_angular(const gagen_cd_frames *F, int fa, int fb, int local,
+GAGEN_CD_INLINE void gagen_cd_value_angular(const gagen_cd_frames *F, int fa, int fb, int local,
                                    double kd, double *w)
 {
     double t[6];
@@ -527,7 +535,7 @@ static void gagen_cd_value_angular(const gagen_cd_frames *F, int fa, int fb, int
 }
 
 /* d of acc = a_O + alpha x p + omega x vp and vel = vp = v_O + omega x p */
-static void gagen_cd_classical_derivative(const gagen_cd_frames *F, int f, ptrdiff_t d,
+GAGEN_CD_INLINE void gagen_cd_classical_derivative(const gagen_cd_frames *F, int f, ptrdiff_t d,
                                           double *dacc, double *dvel)
 {
     double dV[6], dA[6], dp[3], vp[3];
@@ -551,7 +559,7 @@ static void gagen_cd_classical_derivative(const gagen_cd_frames *F, int f, ptrdi
 }
 
 /* the derivative of gagen_cd_row_value along direction d (q's k = d, or qd's k = d - nv) */
-static void gagen_cd_row_derivative(const gagen_cd_frames *F, int fa, int fb, int frame6,
+GAGEN_CD_INLINE void gagen_cd_row_derivative(const gagen_cd_frames *F, int fa, int fb, int frame6,
                                     int local, double kd, ptrdiff_t d, double *dx)
 {
     double da[6], db[6], dva[6], dvb[6], t[6], dpa[3];
