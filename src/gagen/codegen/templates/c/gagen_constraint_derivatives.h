@@ -174,15 +174,33 @@ static void gagen_cd_select(const gagen_cd_model *model, const unsigned char *ac
     set->order = doubles;
 }
 
+/* the solves' steps, the small vector helpers and a row's derivative are inlined where they
+   are used, so their 3- and 6-vectors stay in registers */
+#if defined(__GNUC__) || defined(__clang__)
+#define GAGEN_CD_INLINE static inline __attribute__((always_inline))
+#else
+#define GAGEN_CD_INLINE static inline
+#endif
+
+/* On x86-64 with GCC or clang under glibc, the functions that do the work (one state, its
+   frames' pass and terms, and gagen_cd_gather) are built twice, for any x86-64 and for CPUs
+   with fused multiply-add (chosen when the library loads), as the model's GAGEN_KERNEL
+   kernels are: the FMA version is about 6% faster, its sums rounded once per
+   multiply-add, so its results differ from the other's in the last bits (a machine gives
+   the same bits for the same state, one state or stacked). GAGEN_NO_CLONES turns it off. */
+#if defined(__x86_64__) && defined(__linux__) && (defined(__GNUC__) || defined(__clang__)) \
+    && !defined(GAGEN_NO_CLONES)
+#define GAGEN_CD_CLONES __attribute__((target_clones("fma", "default")))
+#else
+#define GAGEN_CD_CLONES
+#endif
+
 /* y <- pre y - sum_t coef[t] * base[off[t] ...], over len entries (off[t]: where the source
-   row starts in base; pre 1.0 changes nothing): each block of y's entries is read and written once, its sources' rows
-   summed in registers (a row axpy per source would load and store y once for each). The
-   widest blocks hold 24 entries (12 SSE2 or 6 AVX registers: no spill), so a row of 3 nv
-   right-hand sides takes few passes over the sources. On x86-64 with GCC or clang under
-   glibc, a clone for AVX2 CPUs (chosen when the library loads) runs the same operations
-   in the same order four wide: its results are the default's, bit for bit (no FMA
-   contraction: the target adds no "fma"), and a block's width changes no entry's sum.
-   GAGEN_NO_CLONES turns it off. */
+   row starts in base; pre 1.0 changes nothing): each block of y's entries is read and
+   written once, its sources' rows summed in registers (a row axpy per source would load
+   and store y once for each). The widest blocks hold 24 entries (12 SSE2 or 6 AVX
+   registers: no spill), so a row of 3 nv right-hand sides takes few passes over the
+   sources; a block's width changes no entry's sum. */
 #define GAGEN_CD_LOAD4(o) \
     double a##o##0 = y[c + 4 * o] * pre, a##o##1 = y[c + 4 * o + 1] * pre, \
            a##o##2 = y[c + 4 * o + 2] * pre, a##o##3 = y[c + 4 * o + 3] * pre
@@ -192,10 +210,7 @@ static void gagen_cd_select(const gagen_cd_model *model, const unsigned char *ac
 #define GAGEN_CD_STORE4(o) \
     y[c + 4 * o] = a##o##0; y[c + 4 * o + 1] = a##o##1; y[c + 4 * o + 2] = a##o##2; \
     y[c + 4 * o + 3] = a##o##3
-#if defined(__x86_64__) && defined(__linux__) && (defined(__GNUC__) || defined(__clang__)) \
-    && !defined(GAGEN_NO_CLONES)
-__attribute__((target_clones("avx2", "default")))
-#endif
+GAGEN_CD_CLONES
 static void gagen_cd_gather(double *y, double pre, const double *base, const int *off,
                             const double *coef, int count, ptrdiff_t len)
 {
@@ -246,14 +261,6 @@ static void gagen_cd_gather(double *y, double pre, const double *base, const int
 #undef GAGEN_CD_LOAD4
 #undef GAGEN_CD_SUB4
 #undef GAGEN_CD_STORE4
-
-/* the small vector helpers and a row's derivative are inlined where they are used, so
-   their 3- and 6-vectors stay in registers */
-#if defined(__GNUC__) || defined(__clang__)
-#define GAGEN_CD_INLINE static inline __attribute__((always_inline))
-#else
-#define GAGEN_CD_INLINE static inline
-#endif
 
 GAGEN_CD_INLINE void gagen_cd_cross3(const double *a, const double *b, double *out)
 {
@@ -307,7 +314,7 @@ GAGEN_CD_INLINE void gagen_cd_add_cross(const double *a, const double *b, double
 /* M = L^T D L in place (the model's gagen_ltdl: the same steps, from the last coordinate
    up, only along each coordinate's ancestors, and its test of a pivot against M's diagonal
    entry); -1 at a pivot not clearly positive. */
-static int gagen_cd_ltdl(double *M, const int *parent, ptrdiff_t n, double *diagonal)
+GAGEN_CD_INLINE int gagen_cd_ltdl(double *M, const int *parent, ptrdiff_t n, double *diagonal)
 {
     ptrdiff_t k, i, j;
     double d, x;
@@ -325,7 +332,7 @@ static int gagen_cd_ltdl(double *M, const int *parent, ptrdiff_t n, double *diag
 }
 
 /* x <- L^-T x: from the last coordinate up, each to its ancestors (gagen_cn_back) */
-static void gagen_cd_back(const double *L, const int *parent, ptrdiff_t n, double *x)
+GAGEN_CD_INLINE void gagen_cd_back(const double *L, const int *parent, ptrdiff_t n, double *x)
 {
     ptrdiff_t k, i;
     for (k = n - 1; k >= 0; --k)
@@ -334,7 +341,7 @@ static void gagen_cd_back(const double *L, const int *parent, ptrdiff_t n, doubl
 }
 
 /* x <- L^-1 x: from the first coordinate down (gagen_cn_forward) */
-static void gagen_cd_forward(const double *L, const int *parent, ptrdiff_t n, double *x)
+GAGEN_CD_INLINE void gagen_cd_forward(const double *L, const int *parent, ptrdiff_t n, double *x)
 {
     ptrdiff_t k, i;
     double s;
@@ -352,7 +359,7 @@ static void gagen_cd_forward(const double *L, const int *parent, ptrdiff_t n, do
    each adding Y_aj D^-1_j Y_bj for the rows a, b that coordinate moves (its nonzeros in
    nz): the same sums as the dot products of Y's rows, without their zeros and without
    one long chain of additions per entry. */
-static int gagen_cd_delassus(const double *Yt, const double *Dinv, ptrdiff_t n, ptrdiff_t m,
+GAGEN_CD_INLINE int gagen_cd_delassus(const double *Yt, const double *Dinv, ptrdiff_t n, ptrdiff_t m,
                              double damping, double *G, int *nz)
 {
     ptrdiff_t a, b, j, k;
@@ -387,7 +394,7 @@ static int gagen_cd_delassus(const double *Yt, const double *Dinv, ptrdiff_t n, 
 }
 
 /* x <- G^-1 x with G = Lg Dg Lg^T (gagen_cd_delassus) */
-static void gagen_cd_solve_ldlt(const double *G, ptrdiff_t m, double *x)
+GAGEN_CD_INLINE void gagen_cd_solve_ldlt(const double *G, ptrdiff_t m, double *x)
 {
     ptrdiff_t a, b;
     double s;
@@ -405,7 +412,7 @@ static void gagen_cd_solve_ldlt(const double *G, ptrdiff_t m, double *x)
 }
 
 /* Each frame's axes R = R_b R_f and origin p_b + R_b p_f (frames.pose) */
-static void gagen_cd_placements(const gagen_cd_set *c, const double *X, const double *Fo,
+GAGEN_CD_INLINE void gagen_cd_placements(const gagen_cd_set *c, const double *X, const double *Fo,
                                 double *R, double *P)
 {
     int f, i, j, k, b, fr;
@@ -463,7 +470,7 @@ GAGEN_CD_INLINE void gagen_cd_classical(const double *V, const double *A, const 
 }
 
 /* a_c (+ kd J qd) of a constraint, world axes, before its rotation and its axes */
-static void gagen_cd_row_value(const gagen_cd_frames *F, int fa, int fb, int frame6, int local,
+GAGEN_CD_INLINE void gagen_cd_row_value(const gagen_cd_frames *F, int fa, int fb, int frame6, int local,
                                double kd, double *x)
 {
     double xa[6], xb[6], va[6], vb[6], t[6];
@@ -605,7 +612,7 @@ GAGEN_CD_INLINE void gagen_cd_row_derivative(const gagen_cd_frames *F, int fa, i
 /* W += sign (f, p x f + t) on frame fchain's chain, p frame fp's origin, and its
    q-derivative (f and t turn with frame fa's axes when local): nonzero only along fp's
    chain (p moves) and, when local, fa's (the axes turn); dW is zero elsewhere */
-static void gagen_cd_wrench_at(const gagen_cd_frames *F, int fp, int fa, int fchain,
+GAGEN_CD_INLINE void gagen_cd_wrench_at(const gagen_cd_frames *F, int fp, int fa, int fchain,
                                double sign, const double *fw, const double *tw, int local)
 {
     double m[3], df[3], dt[3], dp[3], dm[3];
@@ -641,7 +648,7 @@ static void gagen_cd_wrench_at(const gagen_cd_frames *F, int fp, int fa, int fch
 }
 
 /* x <- R^T x for each of its first `blocks` 3-vectors */
-static void gagen_cd_turn(const double *R, double *x, int blocks)
+GAGEN_CD_INLINE void gagen_cd_turn(const double *R, double *x, int blocks)
 {
     double t[3];
     int h, i;
@@ -655,7 +662,7 @@ static void gagen_cd_turn(const double *R, double *x, int blocks)
 /* Zeroes what gagen_cd_motion and gagen_cd_terms sum into (dW and V, A, W after it, in
    gagen_cd_state's layout) and, where a loop or a "local" row reads a frame's S, dVq, dAq
    or dAv off its chain, those entries; the rest is written before it is read. */
-static void gagen_cd_clear(const gagen_cd_set *c, double *S, double *dVq, double *dAq,
+GAGEN_CD_INLINE void gagen_cd_clear(const gagen_cd_set *c, double *S, double *dVq, double *dAq,
                            double *dAv, double *dW)
 {
     ptrdiff_t nv = c->model->nv, nf = c->nf, f, d, h, at;
@@ -678,6 +685,7 @@ static void gagen_cd_clear(const gagen_cd_set *c, double *S, double *dVq, double
    A = sum Sd_j qd_j; then the active rows' J, as Jt = J^T (nv rows of m), and rhs = -(Jdot qd + kd J qd)
    (gagen_cn_one's rows: a point's velocity, or a frame's twist at A's origin, less B's; in
    A's axes for "local"), the right-hand side of the constrained dynamics. */
+GAGEN_CD_CLONES
 static void gagen_cd_motion(const gagen_cd_set *c, const double *J, const double *R,
                             const double *P, double *S, double *Sd, double *V,
                             double *A, double *T, const double *v, double kd, double *Jt,
@@ -766,6 +774,7 @@ static void gagen_cd_motion(const gagen_cd_set *c, const double *J, const double
 
 /* r2 = [-da_c/dq | -da_c/dqd | 0] (m rows of 3 nv) and r1 += d(J^T lambda)/dq in its first
    nv columns (nv rows of 3 nv), lambda held (the module docstring of gagen.runtime.constraint_derivatives has the sums) */
+GAGEN_CD_CLONES
 static void gagen_cd_terms(const gagen_cd_set *c, const double *J, const double *R, double *P,
                            double *S, double *Sd, double *dVq, double *dAq,
                            double *dAv, double *dW, double *V, double *A, double *W, double *T,
@@ -928,7 +937,7 @@ static void gagen_cd_terms(const gagen_cd_set *c, const double *J, const double 
    rows it needs (gagen_cd_gather, which also scales the row it writes: D^-1 and Dg^-1 take
    no pass of their own), along the tree's ancestors and descendants and the rows' paths
    only (Yt = Y^T, nv rows of m). Offsets into out are ints: (nv + m) 3 nv < 2^31. */
-static void gagen_cd_kkt(const gagen_cd_set *c, const double *L, double *out, const double *Yt,
+GAGEN_CD_INLINE void gagen_cd_kkt(const gagen_cd_set *c, const double *L, double *out, const double *Yt,
                          const double *G, const double *Dinv, double *coef, int *idx)
 {
     const gagen_cd_model *md = c->model;
@@ -1000,6 +1009,7 @@ static void gagen_cd_kkt(const gagen_cd_set *c, const double *L, double *out, co
    (frame_offsets), kd Baumgarte's velocity gain, damping the Delassus matrix's; ws
    GAGEN_CD_WORKSPACE doubles, ints GAGEN_CD_INTS. Returns 0, a GAGEN_CD_* error or
    frame_jacobians's (the outputs then not all written). */
+GAGEN_CD_CLONES
 static int gagen_cd_state(const gagen_cd_set *c, const double *q, const double *qd,
                           const double *tau, const double *p, const double *Fo, double kd,
                           double damping, double *ws, int *ints, double *o0, double *o1,
