@@ -355,27 +355,26 @@ GAGEN_CD_INLINE void gagen_cd_forward(const double *L, const int *parent, ptrdif
 /* G = Y D^-1 Y^T + damping I (Yt = Y^T, nv rows of m) factored in place as Lg Dg Lg^T
    (Lg's unit lower triangle below the diagonal, Dg on it); -1 at a pivot not above
    GAGEN_TS_PIVOT (1e-11) times its diagonal entry (the model's constrained dynamics then
-   answers with its error). G's lower triangle is summed over the coordinates j in order,
-   each adding Y_aj D^-1_j Y_bj for the rows a, b that coordinate moves (its nonzeros in
-   nz): the same sums as the dot products of Y's rows, without their zeros and without
-   one long chain of additions per entry. */
-GAGEN_CD_INLINE int gagen_cd_delassus(const double *Yt, const double *Dinv, ptrdiff_t n, ptrdiff_t m,
-                             double damping, double *G, int *nz)
+   answers with its error). Row a of G's lower triangle is one gagen_cd_gather of the rows
+   j of Yt that row a of Y moves, Y_aj D^-1_j each (off, coef: nv scratch each). */
+GAGEN_CD_INLINE int gagen_cd_delassus(const double *Yt, const double *Dinv, ptrdiff_t n,
+                                      ptrdiff_t m, double damping, double *G, int *off,
+                                      double *coef)
 {
     ptrdiff_t a, b, j, k;
-    int count, t, u;
-    double s, d, diag, ya;
-    for (a = 0; a < m; ++a)
-        for (b = 0; b <= a; ++b) G[m * a + b] = 0.0;
-    for (j = 0; j < n; ++j) {
+    int count;
+    double s, d, diag;
+    for (a = 0; a < m; ++a) {
         count = 0;
-        for (a = 0; a < m; ++a)
-            if (Yt[m * j + a] != 0.0) nz[count++] = (int)a;
-        for (t = 0; t < count; ++t) {
-            a = nz[t];
-            ya = Yt[m * j + a] * Dinv[j];
-            for (u = 0; u <= t; ++u) G[m * a + nz[u]] += ya * Yt[m * j + nz[u]];
+        for (j = 0; j < n; ++j) {
+            if (Yt[m * j + a] != 0.0) {
+                off[count] = (int)(m * j);
+                coef[count] = -(Yt[m * j + a] * Dinv[j]);
+                count += 1;
+            }
         }
+        for (b = 0; b <= a; ++b) G[m * a + b] = 0.0;
+        gagen_cd_gather(G + m * a, 1.0, Yt, off, coef, count, a + 1);
     }
     for (a = 0; a < m; ++a) G[m * a + a] += damping;
     for (j = 0; j < m; ++j) {  /* the lower triangle, column by column (gagen_cn_kkt's steps) */
@@ -788,6 +787,8 @@ static void gagen_cd_terms(const gagen_cd_set *c, const double *J, const double 
     const int *ch, *start, *tb;
     double u[6], e0[6], e2[6], tmp[6], x0[6], dx[6], full[6], fw[3], tw[3];
     double *e1, *Sj;
+    const double *x;
+    int on;
     /* each frame's A and the derivatives of V and A along its chain (root first; a floating
        joint's six coordinates are one group, each on or above the others). With the
        chain's sums V_j = sum_{i <= j} S_i qd_i (j's body, gagen_cd_motion's), Vp_k (k's
@@ -898,33 +899,27 @@ static void gagen_cd_terms(const gagen_cd_set *c, const double *J, const double 
             gagen_cd_wrench_at(&F, frame6 ? fa : fb, fa, fb, -1.0, fw, tw, local);
         row += naxes;
     }
-    /* d(sum S^T W)/dq: [j, k] = (S_k x S_j) . W_f = -S_j . (S_k x* W_f) for j >= k, and
-       S_j . dW_f/dq_k */
+    /* d(sum S^T W)/dq: [j, k] = S_j . (dW_f/dq_k - S_k x* W_f), the second term for j at or
+       below k on the frame's chain ((S_k x S_j) . W_f = -S_j . (S_k x* W_f)) */
     for (f = 0; f < nf; ++f) {
         order = c->order + f * nv * nv;
         ch = c->chain + f * nv;
         n = c->chain_len[f];
-        for (kk = 0; kk < n; ++kk) {
-            k = ch[kk];
-            gagen_cd_fcross(&S[(f * nv + k) * 6], &W[6 * f], u);
-            for (jj = 0; jj < n; ++jj) {
-                j = ch[jj];
-                if (order[k * nv + j] != 0.0) {
-                    Sj = S + (f * nv + j) * 6;
-                    r1[j * n3 + k] -= Sj[0] * u[0] + Sj[1] * u[1] + Sj[2] * u[2]
-                                        + Sj[3] * u[3] + Sj[4] * u[4] + Sj[5] * u[5];
-                }
-            }
-        }
         for (k = 0; k < nv; ++k) {
             e1 = dW + (f * nv + k) * 6;
-            if (e1[0] == 0.0 && e1[1] == 0.0 && e1[2] == 0.0 && e1[3] == 0.0 && e1[4] == 0.0
-                && e1[5] == 0.0)
+            on = order[k * nv + k] != 0.0;  /* k on the frame's chain */
+            if (!on && e1[0] == 0.0 && e1[1] == 0.0 && e1[2] == 0.0 && e1[3] == 0.0
+                && e1[4] == 0.0 && e1[5] == 0.0)
                 continue;  /* (k on no chain that the frame's wrenches turn or move with) */
+            for (h = 0; h < 6; ++h) u[h] = 0.0;
+            if (on) gagen_cd_fcross(&S[(f * nv + k) * 6], &W[6 * f], u);
+            for (h = 0; h < 6; ++h) e0[h] = e1[h] - u[h];
             for (jj = 0; jj < n; ++jj) {
-                Sj = S + (f * nv + ch[jj]) * 6;
-                r1[ch[jj] * n3 + k] += Sj[0] * e1[0] + Sj[1] * e1[1] + Sj[2] * e1[2]
-                                         + Sj[3] * e1[3] + Sj[4] * e1[4] + Sj[5] * e1[5];
+                j = ch[jj];
+                Sj = S + (f * nv + j) * 6;
+                x = order[k * nv + j] != 0.0 ? e0 : e1;
+                r1[j * n3 + k] += Sj[0] * x[0] + Sj[1] * x[1] + Sj[2] * x[2] + Sj[3] * x[3]
+                                  + Sj[4] * x[4] + Sj[5] * x[5];
             }
         }
     }
@@ -1088,7 +1083,7 @@ static int gagen_cd_state(const gagen_cd_set *c, const double *q, const double *
             for (j = 0; j < n; ++j) n2 += Yt[m * j + r] * Dinv[j] * qdd[j];
             lam[r] -= n2;
         }
-        if (gagen_cd_delassus(Yt, Dinv, n, m, damping, G, ints)) return GAGEN_CD_SINGULAR;
+        if (gagen_cd_delassus(Yt, Dinv, n, m, damping, G, ints, Dinv + n)) return GAGEN_CD_SINGULAR;
         gagen_cd_solve_ldlt(G, m, lam);
         for (j = 0; j < n; ++j) {
             n2 = qdd[j];
