@@ -187,9 +187,10 @@ static void gagen_cd_select(const gagen_cd_model *model, const unsigned char *ac
    with fused multiply-add (chosen when the library loads), as the model's GAGEN_KERNEL
    kernels are: the FMA version is about 6% faster, its sums rounded once per
    multiply-add, so its results differ from the other's in the last bits (a machine gives
-   the same bits for the same state, one state or stacked). GAGEN_NO_CLONES turns it off. */
+   the same bits for the same state, one state or stacked). Compiled for FMA already (-mfma,
+   as gagen builds a model's C on an FMA machine), or with GAGEN_NO_CLONES, one version. */
 #if defined(__x86_64__) && defined(__linux__) && (defined(__GNUC__) || defined(__clang__)) \
-    && !defined(GAGEN_NO_CLONES)
+    && !defined(GAGEN_NO_CLONES) && !defined(__FMA__)
 #define GAGEN_CD_CLONES __attribute__((target_clones("fma", "default")))
 #else
 #define GAGEN_CD_CLONES
