@@ -30,6 +30,7 @@ def constraint_terms_extension() -> Extension:
     return Extension("gagen.runtime._constraint_terms",
                      [relative(HERE / "src/gagen/runtime/_constraint_terms.pyx")],
                      include_dirs=[relative(TEMPLATES_C), numpy.get_include()],
+                     depends=[relative(TEMPLATES_C / "gagen_constraint_derivatives.h")],
                      define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
                      extra_compile_args=["-O3"])
 
@@ -43,7 +44,9 @@ def shipped_extensions() -> list[Extension]:
         if found is None:
             continue
         # the model's C files (gagen.codegen.render's MODEL_C_FILES and module.c)
-        sources = sorted(f for f in folder.glob("*.c") if not f.name.startswith("gagen_"))
+        # (not constrained_derivatives.c, which needs the derivative module: builder._c_files)
+        sources = sorted(f for f in folder.glob("*.c") if not f.name.startswith("gagen_")
+                         and f.name != "constrained_derivatives.c")
         extensions.append(Extension(
             f"gagen.shipped.{found.group(1)}", [relative(s) for s in sources],
             include_dirs=[relative(folder)], extra_compile_args=["-O3"]))

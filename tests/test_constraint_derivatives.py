@@ -10,8 +10,12 @@ subset of axes, a damped solve) and for the planar four-bar's loop (both backend
 
 from __future__ import annotations
 
+import ctypes
 import itertools
+import shutil
+import subprocess
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -35,6 +39,8 @@ import gagen
 from gagen.model.numeric import numeric_model
 from gagen.reference.pinocchio import pinocchio_model
 
+needs_cc = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None,
+                              reason="no C compiler (cc or gcc)")
 NAMES = ("dqdd_dq", "dqdd_dqd", "dqdd_dtau", "dforces_dq", "dforces_dqd", "dforces_dtau")
 
 
@@ -389,3 +395,111 @@ def test_a_bad_floating_state_is_refused_with_one_line(backend, cache_dir):
     assert np.isnan(dyn.constrained_forward_dynamics_derivatives(q, nan, tau, on)[1]).any()
     with pytest.raises(ValueError, match="q must have shape"):
         dyn.constrained_forward_dynamics_derivatives(q[:-1], v, tau, on)
+
+
+# ------------------------------------------------- the model's own C, without Python
+
+def standalone_library(dyn, folder: Path) -> ctypes.CDLL:
+    """The model's C files and its derivative module's (not their Python entry points,
+    module.c and derivatives_module.c) compiled by the system's C compiler into a shared
+    library with no Python include path, as a C user embeds them; loaded by ctypes."""
+    dyn.load_derivatives()
+    folder.mkdir(exist_ok=True)
+    for module in (dyn.module, dyn.derivative_module):
+        for path in sorted(Path(module.__file__).parent.iterdir()):
+            if path.suffix in (".c", ".h") and path.name not in ("module.c",
+                                                                  "derivatives_module.c"):
+                shutil.copy(path, folder / path.name)
+    assert (folder / "constrained_derivatives.c").is_file()
+    cc = shutil.which("cc") or shutil.which("gcc")
+    # the new file on its own, as strictly as the other generated C is checked
+    subprocess.run([cc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic", "-c",
+                    "constrained_derivatives.c", "-o", "cd.o"], cwd=folder, check=True)
+    library = folder / "libmodel.so"
+    sources = sorted(p.name for p in folder.glob("*.c"))
+    # -O0: ANYmal's kernels compile in seconds (-O2: tens of seconds)
+    subprocess.run([cc, "-std=c99", "-O0", "-fPIC", "-shared", "-o", str(library), *sources,
+                    "-lm"], cwd=folder, check=True)
+    return ctypes.CDLL(str(library))
+
+
+class ModelC:
+    """<model>_constrained_forward_dynamics_derivatives of a standalone library."""
+
+    def __init__(self, dyn, lib: ctypes.CDLL):
+        ident = dyn.module.__name__.split(".")[-1].split("_")[1:-1]
+        self.f = getattr(lib, f"{'_'.join(ident)}_constrained_forward_dynamics_derivatives")
+        self.f.restype = ctypes.c_int
+        self.nv, self.rows, self.p = dyn.nv, dyn.info.constraint_rows, dyn.parameter_vector()
+
+    def __call__(self, q, qd, tau, active=None, kd=0.0, damping=0.0, p=None):
+        def ptr(x):
+            return x.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        nv, rows = self.nv, self.rows
+        outs = [np.full((nv, nv), np.nan) for _ in range(3)] + [
+            np.full((rows, nv), np.nan) for _ in range(3)]
+        inputs = [np.ascontiguousarray(x, dtype=float) for x in
+                  (q, qd, tau, self.p if p is None else p)]
+        flags = None if active is None else (ctypes.c_ubyte * len(active))(*active)
+        rc = self.f(*map(ptr, inputs), flags, ctypes.c_double(kd), ctypes.c_double(damping),
+                    *map(ptr, outs))
+        return rc, outs
+
+
+def check_model_c(dyn, c: ModelC, q, v, tau, on, kd=0.0, damping=0.0):
+    rc, ours = c(q, v, tau, on, kd, damping)
+    assert rc == 0, f"{on}: the C returned {rc}"
+    theirs = dyn.constrained_forward_dynamics_derivatives(q, v, tau, on, baumgarte=(0.0, kd),
+                                                          damping=damping)
+    for name, x, y in zip(NAMES, ours, theirs):
+        close(x, y, f"{name} of {dyn.info.name} {on}: the model's C", rtol=1e-12)
+
+
+@needs_cc
+def test_the_models_own_c_equals_the_runtime_on_anymal(anymal, tmp_path):
+    """ANYmal C's constrained_derivatives.c, compiled without Python with the model's and
+    its derivative module's C, gives the runtime's six derivatives on its feet (all four
+    3-D, a subset, both references), 6-D and 5-D feet, 6-D, 3-D and 2-D loops in both
+    references, with kd and damping; and its errors: non-finite inputs, dependent rows, a
+    bad argument."""
+    c = ModelC(anymal, standalone_library(anymal, tmp_path))
+    rng = np.random.default_rng(31)
+    sets = [("LF", "RF", "LH", "RH"), ("LF", "RH"), ("RF_local", "LH_local", "RH"),
+            ("LF6", "RF"), ("RH6",), ("RF5", "LH"), ("loop6_local", "RF"), ("loop6", "LH_local"),
+            ("loop3_local", "loop2"), ("loop3", "LF6")]
+    for k, chosen in enumerate(sets):
+        q, v, tau = standing(anymal, rng)
+        on = mask(anymal, *chosen)
+        check_model_c(anymal, c, q, v, tau, on, kd=[0.0, 2.5][k % 2],
+                      damping=[0.0, 1e-3][k // 4 % 2])
+    q, v, tau = standing(anymal, rng)
+    feet = mask(anymal, "LF", "RF", "LH", "RH")
+    # every constraint (NULL): feet held twice, dependent rows, which damping solves
+    assert c(q, v, tau, None)[0] == 4
+    check_model_c(anymal, c, q, v, tau, None, damping=0.1)
+    bad = v.copy()
+    bad[3] = np.nan
+    assert c(q, bad, tau, feet)[0] == 2  # <MODEL>_ERR_NONFINITE
+    assert c(q, v, tau, mask(anymal, "LF", "LF_local"))[0] == 4  # _ERR_SINGULAR_CONSTRAINTS
+    assert c(q, v, tau, feet, kd=-1.0)[0] == -103  # GAGEN_ERR_BAD_ARG
+    zero = q.copy()
+    zero[3:7] = 0.0
+    assert c(zero, v, tau, feet)[0] == -103
+
+
+@needs_cc
+def test_the_models_own_c_equals_the_runtime_on_a_loop(cache_dir, tmp_path):
+    """The four-bar's loop, and a random floating tree's 6-D base contact, 3-D leaves and
+    loops (both references), through their models' own C."""
+    bar = fourbar("compiled", cache_dir)
+    c = ModelC(bar, standalone_library(bar, tmp_path / "bar"))
+    rng = np.random.default_rng(32)
+    for crank in (0.4, 2.2):
+        check_model_c(bar, c, closed_fourbar(crank), rng.normal(size=3), rng.normal(size=3),
+                      None, kd=1.5)
+    tree = load_tree(2, "compiled", cache_dir)
+    c = ModelC(tree, standalone_library(tree, tmp_path / "tree"))
+    for names in (("base",), ("leaf_a", "leaf_b"), ("loop",), ("loop_local",),
+                  ("base", "loop")):
+        q, v, tau = random_state(tree, rng)
+        check_model_c(tree, c, q, v, tau, mask(tree, *names))

@@ -94,7 +94,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "485c30c095fe4a4abbec67dbcfc92ba1d201ff524521ed748718d7e7042ca088") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "09a864fbe0684923932e5ea3d6ca3e3d18e5c936f7969975c262545aca639f0f") < 0) {
         Py_DECREF(module);
         return NULL;
     }

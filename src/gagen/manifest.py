@@ -259,3 +259,76 @@ def dof_parents(bodies, n: int) -> list[int]:
             out[column + k] = before if k == 0 else column + k - 1
         last.append(column + size - 1 if size else before)
     return out
+
+
+def chain_order(bodies, body: int, nv: int) -> np.ndarray:
+    """order[k, j] = 1 where coordinates k and j are on the body's chain to the world and
+    k's joint is j's or above it (a floating joint's six coordinates are each other's)."""
+    joints = []
+    while body >= 0:
+        parent, kind, column = bodies[body]
+        if kind:  # fixed joints (0) have no coordinate
+            joints.append(range(column, column + (6 if kind == JOINT_KINDS["floating"] else 1)))
+        body = parent
+    rank = np.full(nv, -1)
+    for r, columns in enumerate(reversed(joints)):
+        rank[list(columns)] = r
+    on = rank >= 0
+    return (on[:, None] & on[None, :] & (rank[:, None] <= rank[None, :])).astype(float)
+
+
+# a constraint's row of the derivatives' table (gagen_constraint_derivatives.h's
+# GAGEN_CD_TABLE): frame A, frame B (-1: the world), holds a frame, local, its number of
+# axes, its axes
+CONSTRAINT_TABLE = 11
+
+
+def constraint_derivative_layout(info: ModelInfo) -> dict[str, np.ndarray]:
+    """The tables of gagen_constraint_derivatives.h's gagen_cd_model for every declared
+    constraint (the generated C prints them; the runtime's C reads them): the table (frames
+    numbered among the constraints' distinct frames, in order of first appearance), those
+    frames' numbers and bodies, each one's chain of coordinates root first (chain,
+    chain_len), per chain position its joint's first and one-past-last position
+    (group_start, group_end), the chains' order (f, nv, nv), the coordinates' parents and
+    descendants (CSR: desc_ptr, desc) and where each quaternion starts in q. int32 arrays
+    but order (float64)."""
+    nv = info.dof
+    names = list(dict.fromkeys(f for c in info.constraints
+                               for f in c.frames[:2 if c.type == "loop" else 1]))
+    index = {name: i for i, name in enumerate(names)}
+    table = np.zeros((len(info.constraints), CONSTRAINT_TABLE), dtype=np.int32)
+    for row, c in enumerate(info.constraints):
+        table[row, :5] = (index[c.frames[0]], index[c.frames[1]] if c.type == "loop" else -1,
+                          c.holds_frame, c.reference == "local", len(c.axes))
+        table[row, 5: 5 + len(c.axes)] = c.axes
+    frames = np.array([info.frame_indices[name] for name in names], dtype=np.int32)
+    bodies = np.array([info.frames[k][1] for k in frames], dtype=np.int32)
+    order = np.zeros((len(names), nv, nv))
+    for f, body in enumerate(bodies):
+        order[f] = chain_order(info.bodies, int(body), nv)
+    chain = np.zeros((len(names), nv), dtype=np.int32)
+    chain_len = np.zeros(len(names), dtype=np.int32)
+    start, end = np.zeros_like(chain), np.zeros_like(chain)
+    for f in range(len(names)):
+        on = np.flatnonzero(np.diagonal(order[f]))
+        chain[f, :len(on)] = on  # coordinates in q's order: a root's before its subtree's
+        chain_len[f] = len(on)
+        for i in range(len(on)):  # a joint's coordinates are each other's (a floating one)
+            joined = i > 0 and order[f, on[i], on[i - 1]] != 0
+            start[f, i] = start[f, i - 1] if joined else i
+        for i in range(len(on) - 1, -1, -1):
+            joined = i + 1 < len(on) and start[f, i + 1] == start[f, i]
+            end[f, i] = end[f, i + 1] if joined else i + 1
+    parents = dof_parents(info.bodies, nv)
+    below: list[list[int]] = [[] for _ in range(nv)]  # each coordinate's descendants
+    for k in range(nv):
+        i = parents[k]
+        while i >= 0:
+            below[i].append(k)
+            i = parents[i]
+    return {"table": table, "frames": frames, "bodies": bodies, "chain": chain,
+            "chain_len": chain_len, "group_start": start, "group_end": end, "order": order,
+            "parent": np.array(parents, dtype=np.int32),
+            "desc_ptr": np.cumsum([0] + [len(b) for b in below]).astype(np.int32),
+            "desc": np.array([k for b in below for k in b] or [0], dtype=np.int32),
+            "quat": np.array([offset for offset, _ in info.quaternions()], dtype=np.int32)}

@@ -25,7 +25,12 @@ from pathlib import Path
 from .. import __version__
 from ..codegen.config import CodegenConfig
 from ..codegen.derivatives import generate_derivatives
-from ..codegen.render import c_identifier, generate, write_sources
+from ..codegen.render import (
+    CONSTRAINED_DERIVATIVES_FILE,
+    c_identifier,
+    generate,
+    write_sources,
+)
 from ..errors import BuildError, CompilerNotFoundError, warn_user
 from ..model.model import Model
 from ..runtime.compiled import CompiledDynamics
@@ -228,9 +233,13 @@ def _compile_commands(cc: list[str], folder: Path, sources: list[str],
 
 
 def _c_files(folder: Path) -> list[str]:
-    """Every C file of a build folder: the module's table (module.c), the model's kernels
-    (their number grows with the model: codegen/segments.py) and gagen's integrator."""
-    return sorted(path.name for path in folder.glob("*.c"))
+    """The C files of a build folder that its module compiles: the module's table
+    (module.c), the model's kernels (their number grows with the model:
+    codegen/segments.py) and gagen's integrator; not the constrained dynamics' derivatives
+    (constrained_derivatives.c), which call the derivative module's kernels and are there
+    for C programs that link both (the runtime runs the same C through the modules)."""
+    return sorted(path.name for path in folder.glob("*.c")
+                  if path.name != CONSTRAINED_DERIVATIVES_FILE)
 
 
 def _link_command(cc: list[str], folder: Path, module_name: str, suffix: str) -> list[str]:

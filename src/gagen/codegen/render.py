@@ -14,13 +14,21 @@ from importlib import resources
 from pathlib import Path
 
 import jinja2
+import numpy as np
 import sympy as sp
 from sympy.core.function import Function
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE, precedence
 
 from .. import __version__
-from ..manifest import FRICTION_WIDTH, JOINT_KINDS, QUATERNION_RESTORING, ModelInfo, dof_parents
+from ..manifest import (
+    FRICTION_WIDTH,
+    JOINT_KINDS,
+    QUATERNION_RESTORING,
+    ModelInfo,
+    constraint_derivative_layout,
+    dof_parents,
+)
 from ..symbolic.centroidal import centroidal_program
 from ..symbolic.differentiate import needed_definitions
 from ..symbolic.frames import OFFSET_SIZE, TRANSFORM_SIZE, add_frame_kinematics
@@ -45,6 +53,11 @@ MODEL_C_FILES = ("mass_matrix.c", "rhs.c", "simulation.c", "inverse_dynamics.c",
                  "regressor.c", "centroidal.c", "integrator.c")
 # the module's one file that speaks to Python: the kernels' table for gagen's runtime
 MODULE_FILE = "module.c"
+# a model with constraints: the derivatives of its constrained dynamics, which call the
+# derivative module's kernels too, so its module leaves the file out (builder._c_files);
+# the header it includes is copied next to it
+CONSTRAINED_DERIVATIVES_FILE = "constrained_derivatives.c"
+CONSTRAINED_DERIVATIVES_HEADER = "gagen_constraint_derivatives.h"
 _C_KEYWORDS = frozenset({
     "auto", "break", "case", "char", "const", "continue", "default", "do", "double", "else",
     "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register",
@@ -58,7 +71,8 @@ _C_KEYWORDS = frozenset({
 # gagen's own symbols (gagen_so_*, GAGEN_*), or be a C keyword. (System headers cannot be
 # shadowed: the build folder is never on the include path, every local include is quoted.)
 _GAGEN_FILE_STEMS = frozenset(Path(f).stem.lower()
-                              for f in (*COPIED_FILES, *MODEL_C_FILES, MODULE_FILE))
+                              for f in (*COPIED_FILES, *MODEL_C_FILES, MODULE_FILE,
+                                        CONSTRAINED_DERIVATIVES_FILE))
 RESERVED_PREFIX = "model_"
 
 
@@ -886,7 +900,14 @@ def generate(eqs: Equations, module_name: str, key: str,
     kernels_template = env.get_template("model/kernels.c.j2")
     for k, segments in enumerate(kernel_files(kernels.segments, config.file_chars)):
         files[f"kernels_{k}.c"] = kernels_template.render(context, segments=segments)
-    for name in COPIED_FILES:
+    copied = list(COPIED_FILES)
+    if info.constraints:
+        context["cd"] = {key: np.ravel(value).tolist()
+                         for key, value in constraint_derivative_layout(info).items()}
+        files[CONSTRAINED_DERIVATIVES_FILE] = env.get_template(
+            "model/constrained_derivatives.c.j2").render(context)
+        copied.append(CONSTRAINED_DERIVATIVES_HEADER)
+    for name in copied:
         text = resources.files("gagen.codegen").joinpath("templates", "c", name).read_text()
         files[name] = f"/* {context['header']} (copied from gagen's templates) */\n" + text
     return GeneratedCode(files=files, ops_before=cse.ops_before, ops_after=cse.ops_after,

@@ -39,9 +39,9 @@ import math
 
 import numpy as np
 
-from ..manifest import dof_parents
+from ..manifest import chain_order, constraint_derivative_layout
 from .constraints import active_rows
-from .frames import FLOATING, pose
+from .frames import pose
 
 try:  # the C of one state (setup.py builds it with the runtime); NumPy without it
     from . import _constraint_terms as _terms
@@ -149,17 +149,7 @@ class _Frame:
 def _chain_order(info, body: int, nv: int) -> np.ndarray:
     """order[k, j] = 1 where coordinates k and j are on the body's chain and k's joint is
     j's or above it (a floating joint's six coordinates are each other's)."""
-    joints = []
-    while body >= 0:
-        parent, kind, column = info.bodies[body]
-        if kind:  # fixed joints (0) have no coordinate
-            joints.append(range(column, column + (6 if kind == FLOATING else 1)))
-        body = parent
-    rank = np.full(nv, -1)
-    for r, columns in enumerate(reversed(joints)):
-        rank[list(columns)] = r
-    on = rank >= 0
-    return (on[:, None] & on[None, :] & (rank[:, None] <= rank[None, :])).astype(float)
+    return chain_order(info.bodies, body, nv)
 
 
 def _rotated_t(R, w, x):
@@ -335,67 +325,21 @@ def _compiled(dyn, q, qd, tau, p, mask, kd, damping):
 
 def _plan(dyn, mask):
     """_constraint_terms's Plan of a compiled model and an active set, kept per model and
-    set."""
+    set: the layout of every declared constraint (the generated C's), the set chosen in C."""
     kept = dyn.__dict__.setdefault("_constraint_derivative_plans", {})
     key = mask.tobytes()
     found = kept.get(key)
     if found is not None:
         return found
     dyn.load_derivatives()
-    info, nv = dyn.info, dyn.nv
-    names, table, order, rows, bodies, frames, _ = _layout(dyn, mask)
-    chain = np.zeros((len(names), nv), dtype=np.int32)
-    chain_len = np.zeros(len(names), dtype=np.int32)
-    start, end = np.zeros_like(chain), np.zeros_like(chain)
-    for f in range(len(names)):
-        on = np.flatnonzero(np.diagonal(order[f]))
-        chain[f, :len(on)] = on  # coordinates in q's order: a root's before its subtree's
-        chain_len[f] = len(on)
-        for i in range(len(on)):  # a joint's coordinates are each other's (a floating one)
-            joined = i > 0 and order[f, on[i], on[i - 1]] != 0
-            start[f, i] = start[f, i - 1] if joined else i
-        for i in range(len(on) - 1, -1, -1):
-            joined = i + 1 < len(on) and start[f, i + 1] == start[f, i]
-            end[f, i] = end[f, i + 1] if joined else i + 1
-    quat = np.array([offset for offset, _ in info.quaternions()], dtype=np.int32)
-    parents = dof_parents(info.bodies, nv)
-    below: list[list[int]] = [[] for _ in range(nv)]  # each coordinate's descendants
-    for k in range(nv):
-        i = parents[k]
-        while i >= 0:
-            below[i].append(k)
-            i = parents[i]
-    desc_ptr = np.cumsum([0] + [len(b) for b in below]).astype(np.int32)
-    desc = np.array([k for b in below for k in b] or [0], dtype=np.int32)
-    found = _terms.Plan(dyn.module.API, dyn.derivative_module.API, frames, bodies, table,
-                        np.array(parents, dtype=np.int32),
-                        np.asarray(rows, dtype=np.int32), quat, chain, chain_len, start, end,
-                        np.ascontiguousarray(order, dtype=float),
-                        np.ascontiguousarray(mask, dtype=np.uint8), desc_ptr, desc)
+    t = constraint_derivative_layout(dyn.info)
+    found = _terms.Plan(dyn.module.API, dyn.derivative_module.API, t["frames"], t["bodies"],
+                        t["table"], t["parent"], t["quat"], t["chain"], t["chain_len"],
+                        t["group_start"], t["group_end"], t["order"],
+                        np.ascontiguousarray(mask, dtype=np.uint8), t["desc_ptr"], t["desc"])
     if len(kept) < 256:
         kept[key] = found
     return found
-
-
-def _layout(dyn, mask):
-    """(frame names, the C's constraint table, the chains' order (f, nv, nv), the active
-    rows, the frames' bodies and numbers, the mask as a tuple) of an active set."""
-    info, nv = dyn.info, dyn.nv
-    active = [c for c, on in zip(info.constraints, mask) if on]
-    names = list(dict.fromkeys(f for c in active for f in c.frames[:2 if c.type == "loop"
-                                                                      else 1]))
-    index = {name: i for i, name in enumerate(names)}
-    table = np.zeros((len(active), 11), dtype=np.int32)
-    for row, c in enumerate(active):
-        table[row, :5] = (index[c.frames[0]], index[c.frames[1]] if c.type == "loop" else -1,
-                          c.holds_frame, c.reference == "local", len(c.axes))
-        table[row, 5: 5 + len(c.axes)] = c.axes
-    order = np.stack([_chain_order(info, info.frames[info.frame_indices[name]][1], nv)
-                      for name in names]) if names else np.zeros((0, nv, nv))
-    frames = np.array([info.frame_indices[name] for name in names], dtype=np.int32)
-    bodies = np.array([info.frames[k][1] for k in frames], dtype=np.int32)
-    return (names, table, np.ascontiguousarray(order), active_rows(info, mask), bodies,
-            frames, tuple(bool(x) for x in mask))
 
 
 def _constraint_terms(dyn, q, qd, qdd, p, mask, lam, kd: float, r2: list):
