@@ -94,7 +94,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "09a864fbe0684923932e5ea3d6ca3e3d18e5c936f7969975c262545aca639f0f") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "074845cba16cc9256d4e5fe2a157419afd2792d3d74ee63eed6079c45a1561ab") < 0) {
         Py_DECREF(module);
         return NULL;
     }
