@@ -45,6 +45,12 @@ CONSTANTS = {"M_PI": "math.pi", "M_PI_2": "(math.pi / 2)", "M_PI_4": "(math.pi /
 _ARITHMETIC = (ast.Expression, ast.BinOp, ast.UnaryOp, ast.Add, ast.Sub, ast.Mult, ast.Div,
                ast.USub, ast.UAdd, ast.Constant, ast.Name, ast.Load, ast.Call)
 _INPUTS = ("q", "qd", "qdd", "tau", "p")
+# the most operations a printed value may add to the program by being duplicated into its
+# readers (XLA's fusion inlines cheap values into every reader); a costlier one is kept in
+# an array of its own (_Writer.body). Measured on the Panda arm's forward dynamics (4,096
+# states): 8 keeps 257 of the 457 values read twice or more, which ran 1.4x faster than keeping
+# all (fastest of 80 interleaved runs: 1.83 ms against 2.56 ms; 3, 16 and 32 were no faster).
+DUPLICATED = 8
 
 
 def _symbol_names(eqs, cse: CSEResult) -> dict[sp.Symbol, str]:
@@ -90,6 +96,9 @@ class _Writer:
         self.printer = GagenCPrinter(dict(self.names), list(eqs.coords.q), fast_trig=False)
         self.texts: dict[sp.Symbol, str] = {}
         self.lines: list[str] = []
+        # each printed name's cost where XLA inlines it: its operations and those of the
+        # names it reads that are inlined too (0 for a value kept in an array of its own)
+        self.inlined: dict[str, int] = {}
 
     def text(self, expr: sp.Expr) -> str:
         return self.printer.doprint(expr)
@@ -139,12 +148,14 @@ class _Writer:
             lines.append(f"sn{k} = jnp.sin(q{k})")
             lines.append(f"cs{k} = jnp.cos(q{k})")
             defined |= {f"sn{k}", f"cs{k}"}
-        # how many expressions of this body read each name: a value read more than once
-        # is divided by `unit` (1.0, a value XLA cannot fold, from the first input), which
-        # makes it a producer XLA's CPU fusion does not duplicate into each consumer (it
-        # duplicates cheap elementwise producers: the Panda's inverse-dynamics derivatives
-        # became twenty times their operations, 58 s to compile; 5.6 s with this, and the
-        # batched run 12x faster). x / 1.0 is x exactly.
+        # how many expressions of this body read each name: a value whose duplication into
+        # its readers would cost more than DUPLICATED operations is divided by `unit` (1.0,
+        # a value XLA cannot fold, from the first input), which makes it a producer XLA's
+        # CPU fusion does not duplicate into each consumer (it duplicates cheap elementwise
+        # producers: with no such value, the Panda's inverse-dynamics derivatives became
+        # twenty times their operations, 58 s to compile). Each kept value costs a divide
+        # and an array of its own over the batch, written and read back (one loop of XLA's
+        # each): a value cheaper than that is left to be duplicated. x / 1.0 is x exactly.
         readers: dict[str, int] = {}
         for e in exprs + list(later):
             for r in self.printer.reads(e):
@@ -158,8 +169,12 @@ class _Writer:
             if a.symbol not in self.texts:
                 self.texts[a.symbol] = self.text(a.expr)
             text = _checked(self.texts[a.symbol], defined)
-            if readers.get(name, 0) > 1:
+            cost = int(sp.count_ops(a.expr)) + sum(
+                self.inlined.get(r, 0) for r in self.printer.reads(a.expr))
+            if (readers.get(name, 0) - 1) * cost > DUPLICATED:
                 text = f"({text}) / unit"
+                cost = 0
+            self.inlined[name] = cost
             lines.append(f"{name} = {text}")
             defined.add(name)
         self.output_texts = {k: [_checked(self.text(e), defined) for e in v]
