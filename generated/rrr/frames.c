@@ -1669,7 +1669,7 @@ int rrr_constrained_forward_dynamics(const double *q, const double *qd,
                                              double kd, double damping, double *qdd,
                                              double *forces)
 {
-    double L[GAGEN_FR_NV * GAGEN_FR_NV], J[GAGEN_CN_MAXROWS * GAGEN_FR_NV];
+    double L[GAGEN_FR_NV * GAGEN_FR_NV + GAGEN_FR_NV], J[GAGEN_CN_MAXROWS * GAGEN_FR_NV];
     double rhs[GAGEN_CN_MAXROWS], lambda[GAGEN_CN_MAXROWS];
     int m, j, rc;
     if (!(kp >= 0.0 && kd >= 0.0 && damping >= 0.0)) return GAGEN_ERR_BAD_ARG;

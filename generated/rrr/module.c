@@ -94,7 +94,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "074845cba16cc9256d4e5fe2a157419afd2792d3d74ee63eed6079c45a1561ab") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "1ea6e76fd6fd44fff32f18d337471f5e22dce7ebe69abc61ffdbe3c89be8b580") < 0) {
         Py_DECREF(module);
         return NULL;
     }

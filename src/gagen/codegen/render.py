@@ -534,6 +534,7 @@ def _symbol_names(eqs: Equations, cse: CSEResult) -> dict[sp.Symbol, str]:
 KERNEL_ARRAYS = {
     "mass_matrix": ("q", "p", "M"),
     "forcing": ("q", "qd", "tau", "p", "F"),
+    "mass_forcing": ("q", "qd", "tau", "p", "MF"),
     "inverse_dynamics": ("q", "qd", "qdd", "p", "tau"),
     "energy": ("q", "qd", "p", "TV"),
     "gravity": ("q", "p", "G"),
@@ -841,6 +842,14 @@ def generate(eqs: Equations, module_name: str, key: str,
         **_regressor_blocks(eqs, kernels, config, reg, reg_parameters),
         **_centroidal_blocks(eqs, kernels, config),
     }
+    if model.constraints:
+        # the constrained dynamics need M and F at each call: one program for both shares
+        # their kinematics (ANYmal C: 4495 operations instead of 2278 + 2667) and fetches
+        # less code per call than the two kernels one after the other
+        blocks["mass_forcing"] = kernels.block(
+            "mass_forcing", [e for _, _, e in mass_entries] + list(out["forcing"]),
+            [_symmetric_target("MF", n, r, s) for r, s, _ in mass_entries]
+            + [f"MF[{n * n + r}]" for r in range(n)])
     # per body and per frame, the code of one alone: a frame's kinematics then places its
     # path to the world, not every body and every frame
     cases = {
