@@ -31,7 +31,12 @@ from ..manifest import (
 )
 from ..symbolic.centroidal import centroidal_program
 from ..symbolic.differentiate import needed_definitions
-from ..symbolic.frames import OFFSET_SIZE, TRANSFORM_SIZE, add_frame_kinematics
+from ..symbolic.frames import (
+    OFFSET_SIZE,
+    TRANSFORM_SIZE,
+    add_frame_kinematics,
+    constrained_frames,
+)
 from ..symbolic.gibbs_appell import Equations
 from ..symbolic.regressor import (
     KINEMATICS_PER_BODY,
@@ -822,6 +827,7 @@ def generate(eqs: Equations, module_name: str, key: str,
     n = eqs.n
     lower = [(r, s) for r in range(n) for s in range(r + 1)]
     out = cse.outputs
+    info = ModelInfo.from_model(model)
     zero = {(r, s) for (r, s), e in zip(lower, out["mass_matrix"]) if e == 0}
     zero_fill = zero_fills_mass_matrix(n, len(zero))
     mass_entries = [(r, s, e) for (r, s), e in zip(lower, out["mass_matrix"])
@@ -843,18 +849,27 @@ def generate(eqs: Equations, module_name: str, key: str,
         **_centroidal_blocks(eqs, kernels, config),
     }
     if model.constraints:
-        # the constrained dynamics need M, F and the bodies' placements at each call: one
+        # the constrained dynamics need M, F and the constrained frames' poses, motions and
+        # Jacobian columns (symbolic.frames.constraint_frame_terms) at each call: one
         # program for them shares their kinematics (ANYmal C: 4495 operations instead of
         # 2278 + 2667 for M and F) and fetches less code per call than kernels one after the
-        # other; the placements from it, instead of frames.c's loop over the bodies, took
-        # ANYmal C's constrained forward dynamics 2.92 -> 2.81 us in C (medians of 9
-        # alternating runs)
+        # other. The frames' terms from it, instead of frames.c's loops over the bodies'
+        # tables, took ANYmal C's four feet 3.53 -> 3.44 us per call from Python (40.1k ->
+        # 34.2k instructions in C, with the placements' step before). Of M, the lower
+        # triangle only, where the factorisation reads it: each entry on a coordinate's
+        # path to the world (the others are zero and never read), a zero one written as
+        # such, no clearing of all n^2 first (2.79 -> 2.71 us in C, medians of 9 runs)
+        parents = dof_parents(info.bodies, n)
+        chains = [{r, *_ancestors(parents, r)} for r in range(n)]
+        lower_entries = [(r, s, e) for (r, s), e in zip(lower, out["mass_matrix"])
+                         if e != 0 or s in chains[r]]
+        terms = out["constraint_frames"]
         blocks["mass_forcing"] = kernels.block(
             "mass_forcing",
-            [e for _, _, e in mass_entries] + list(out["forcing"]) + list(out["placements"]),
-            [_symmetric_target("MF", n, r, s) for r, s, _ in mass_entries]
+            [e for _, _, e in lower_entries] + list(out["forcing"]) + list(terms),
+            [f"MF[{r * n + s}]" for r, s, _ in lower_entries]
             + [f"MF[{n * n + r}]" for r in range(n)]
-            + [f"MF[{n * n + n + k}]" for k in range(len(out["placements"]))])
+            + [f"MF[{n * n + n + k}]" for k in range(len(terms))])
     # per body and per frame, the code of one alone: a frame's kinematics then places its
     # path to the world, not every body and every frame
     cases = {
@@ -862,7 +877,6 @@ def generate(eqs: Equations, module_name: str, key: str,
         "frame_offsets": _case_blocks(kernels, out["frame_offsets"], OFFSET_SIZE, "F"),
     }
     stages = _stages(eqs, kernels, config.inline_stage_ops)
-    info = ModelInfo.from_model(model)
     context = {
         **model_context(eqs),
         "nreg": len(reg_parameters),
@@ -984,7 +998,14 @@ def constraint_context(info: ModelInfo, parameters: list[str]) -> dict:
     eliminations = [[(c, i) for c in sorted(path, reverse=True) for i in _ancestors(parents, c)]
                     for path in paths]
     size = sum(len(e) * c.dimension for e, c in zip(eliminations, info.constraints))
+    slots = constrained_frames(info)
     return {"constraint_table": table, "constraint_axes": axes, "constraint_rows": row,
+            # per constraint the slots of its frames among the constrained frames (B: -1 for
+            # a contact), and per slot where its terms start after M and F and its columns'
+            # coordinates (symbolic.frames.constraint_frame_terms)
+            "constraint_slots": [[slots.index(f) for f in c.frames] + [-1] * (2 - len(c.frames))
+                                 for c in info.constraints],
+            "constraint_frame_columns": [_frame_column_coordinates(info, f) for f in slots],
             "constraint_names": names, "constraint_ranges": ranges,
             "constraint_common": common,
             "constraint_range_size": max([len(r) for r in ranges + common] + [1]),
@@ -1018,6 +1039,19 @@ def _ancestors(parents: list[int], c: int) -> list[int]:
     return out
 
 
+def _frame_column_coordinates(info: ModelInfo, frame: str) -> list[int]:
+    """The coordinates of a frame's Jacobian columns in frames.c's gagen_frame_columns
+    order: from its body up, a floating joint's linear three then its angular three."""
+    sizes = {JOINT_KINDS["fixed"]: 0, JOINT_KINDS["floating"]: 6}
+    out: list[int] = []
+    body = info.frames[info.frame_indices[frame]][1]
+    while body >= 0:
+        parent, kind, column = info.bodies[body]
+        out += list(range(column, column + sizes.get(kind, 1)))
+        body = parent
+    return out
+
+
 def _runs(coordinates: set[int]) -> list[tuple[int, int]]:
     """Sorted coordinates as runs [start, stop) of consecutive ones."""
     runs: list[tuple[int, int]] = []
@@ -1032,14 +1066,7 @@ def _runs(coordinates: set[int]) -> list[tuple[int, int]]:
 def _path_coordinates(info: ModelInfo, frame: str) -> set[int]:
     """The velocity coordinates of the joints between a frame and the world: the columns
     where its Jacobian, and its rows of J L^-1, can be non-zero."""
-    sizes = {JOINT_KINDS["fixed"]: 0, JOINT_KINDS["floating"]: 6}
-    out: set[int] = set()
-    body = info.frames[info.frame_indices[frame]][1]
-    while body >= 0:
-        parent, kind, column = info.bodies[body]
-        out.update(range(column, column + sizes.get(kind, 1)))
-        body = parent
-    return out
+    return set(_frame_column_coordinates(info, frame))
 
 
 def zero_fills_mass_matrix(n: int, zeros: int) -> bool:

@@ -62,6 +62,8 @@ class Equations:
     placements: list[sp.Expr] | None = None
     joint_transforms: list[sp.Expr] | None = None
     frame_offsets: list[sp.Expr] | None = None
+    # per constrained frame its pose, motion and Jacobian columns (symbolic/frames.py)
+    constraint_frames: list[sp.Expr] | None = None
     # Y(q, qd, qdd) with inverse_dynamics = Y pi, and pi in the parameters
     # (symbolic.regressor.attach_regressor; None until attached). Y is written in
     # `intermediates` followed by `regressor_intermediates`: a program of its own, so that
@@ -109,6 +111,8 @@ class Equations:
             outputs["placements"] = list(self.placements)
             outputs["joint_transforms"] = list(self.joint_transforms)
             outputs["frame_offsets"] = list(self.frame_offsets)
+        if self.constraint_frames is not None:
+            outputs["constraint_frames"] = list(self.constraint_frames)
         return outputs
 
     def regressor_outputs(self) -> dict[str, list[sp.Expr]]:
