@@ -94,7 +94,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "1ea6e76fd6fd44fff32f18d337471f5e22dce7ebe69abc61ffdbe3c89be8b580") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "466b89571584ec04c5424e200b209975c32c9cd03083b6955f4a0093e1b9ed11") < 0) {
         Py_DECREF(module);
         return NULL;
     }
