@@ -184,20 +184,22 @@ def test_a_batch_of_10000_states_is_one_vmapped_call():
 
 
 @pytest.mark.parametrize("name", ["panda", "anymal"])
-def test_a_vmapped_jacfwd_is_one_ffi_call_and_one_product(name):
+def test_a_vmapped_jacfwd_is_one_ffi_call_and_no_product(name):
     """jax.jit(jax.vmap(jax.jacfwd(forward_dynamics))) over (q, q̇, τ): one call of the
-    derivative kernel for the whole batch, then one dot of the Jacobian's blocks by jacfwd's
-    basis, in the Jacobian's own layout: no product per block or per column, no transpose
-    over the batch (the FFI's overhead over the stacked call, issue 29); equal to the
-    stacked derivatives."""
+    derivative kernel for the whole batch, which writes the Jacobian in jacfwd's layout and
+    multiplies it by jacfwd's basis in its C loop (gagen.jax.product: the identity, so the
+    Jacobian's rows as they are): no dot, no transpose, no array over the batch but the
+    result (the FFI's overhead over the stacked call, issue 29); equal to the stacked
+    derivatives."""
     dyn, f = model(name), functions(name, "ffi")
     q, qd, tau = state(dyn, 7, rows=32)
     jac = jax.vmap(jax.jacfwd(f["forward_dynamics"], argnums=(0, 1, 2)))
     program = str(jax.make_jaxpr(jac)(q, qd, tau))
     compiled = jax.jit(jac).lower(q, qd, tau).compile()
     hlo = compiled.as_text()
-    assert program.count("dot_general[") == 1
+    assert program.count("dot_general[") == 0
     assert hlo.count('custom_call_target="gagen_kernel"') == 1  # the primal's call is dropped
+    assert " dot(" not in hlo and "__ynn_fusion" not in hlo
     # transposes: only of a floating base's rotation (per state), never of the basis' rows
     basis = str(dyn.nq + 2 * dyn.nv)
     shapes = re.findall(r"f64\[([\d,]*)\](?:\{[\d,]*\})? transpose\(", hlo)
@@ -219,6 +221,47 @@ def test_a_vmapped_jacfwd_is_one_ffi_call_and_one_product(name):
         for g, w in zip(got, want):
             assert g.dtype == jnp.float32
             np.testing.assert_array_equal(np.asarray(g), w.astype(np.float32))
+
+
+@pytest.mark.parametrize("name", ["panda", "anymal"])
+def test_the_jvp_product_takes_any_tangents(name):
+    """The FFI's JVP product (gagen.jax.product) against the callback target's (the
+    kernel's blocks through gagen's stacked call, ∂q̈/∂q mapped by XLA, an einsum), for
+    tangents that are not jacfwd's basis: a batch of n shared by every state that is not
+    the identity (the shim's product in C: a permutation, random ones), a batch of another
+    size (the dot), a tangent per state (the primitive over the batch); and jax.jacrev (its
+    transpose) by a batch of cotangents."""
+    dyn = model(name)
+    ffi_fd, ref_fd = (functions(name, t)["forward_dynamics"] for t in ("ffi", "callback"))
+    q, qd, tau = state(dyn, 11, rows=6)
+    n = dyn.nq + 2 * dyn.nv
+    rng = np.random.default_rng(5)
+
+    def pushed(fd):
+        def per_state(q, qd, tau, tangents):
+            def jvp(t):
+                parts = (t[:dyn.nq], t[dyn.nq: dyn.nq + dyn.nv], t[dyn.nq + dyn.nv:])
+                return jax.jvp(fd, (q, qd, tau), parts)[1]
+            return jax.vmap(jvp)(tangents)
+        return jax.jit(jax.vmap(per_state, in_axes=(0, 0, 0, None)))
+
+    for tangents in (np.eye(n)[rng.permutation(n)], rng.normal(size=(n, n)),
+                     rng.normal(size=(5, n)), np.eye(n)):
+        close(pushed(ffi_fd)(q, qd, tau, tangents), pushed(ref_fd)(q, qd, tau, tangents),
+              1e-12)
+    per_state = rng.normal(size=(6, n))
+
+    def jvp(fd):
+        def one(q, qd, tau, t):
+            return jax.jvp(fd, (q, qd, tau), (t[:dyn.nq], t[dyn.nq: dyn.nq + dyn.nv],
+                                              t[dyn.nq + dyn.nv:]))[1]
+        return jax.jit(jax.vmap(one))
+
+    close(jvp(ffi_fd)(q, qd, tau, per_state), jvp(ref_fd)(q, qd, tau, per_state), 1e-12)
+    rev = [jax.jit(jax.vmap(jax.jacrev(fd, argnums=(0, 1, 2))))(q, qd, tau)
+           for fd in (ffi_fd, ref_fd)]
+    for got, want in zip(*rev):
+        close(got, want, 1e-12)
 
 
 @pytest.mark.parametrize("target", ["ffi", "callback"])
@@ -453,7 +496,30 @@ def test_the_shim_refuses_a_model_it_does_not_know():
     with pytest.raises(Exception, match="has not registered"):
         jax.block_until_ready(call(np.zeros(3), model=np.int64(0), key=np.int64(12345),
                                    kernel=np.int32(5), frame=np.int32(-1),
-                                   has_p=np.int32(0)))
+                                   has_p=np.int32(0), floating=np.zeros(1, np.int64)))
+
+
+@pytest.mark.parametrize("floating", [[1, 0, 0], [1], [2, 0, 0], [-1]])
+def test_the_shim_refuses_floating_joints_that_do_not_fit_the_model(floating):
+    """The floating joints' attribute (where the shim maps ∂q̈/∂v to ∂q̈/∂q) is checked
+    against the model's sizes before any state is touched: one that would read or write
+    out of bounds is an error, not a crash."""
+    from gagen.jax import ffi
+    from gagen.jax.registry import KERNELS
+
+    dyn, f = model("rrr"), functions("rrr", "ffi")
+    jax.block_until_ready(f["forward_dynamics"](np.zeros(3), np.zeros(3), np.zeros(3)))
+    from gagen.jax.ops import FFIOps
+
+    ops = FFIOps(dyn)
+    slot, key = ops.table("derivatives")
+    kernel = list(KERNELS).index("forward_dynamics_jacobian")
+    call = ffi._call_for(((dyn.nv * (dyn.nq + 2 * dyn.nv),),), "float64")
+    with pytest.raises(Exception, match="floating joints attribute"):
+        jax.block_until_ready(call(np.zeros(3), np.zeros(3), np.zeros(3),
+                                   model=np.int64(slot), key=np.int64(key),
+                                   kernel=np.int32(kernel), frame=np.int32(-1),
+                                   has_p=np.int32(0), floating=np.asarray(floating, np.int64)))
 
 
 def test_a_cached_printed_module_loads_without_sympy(tmp_path):

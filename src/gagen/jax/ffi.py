@@ -60,7 +60,7 @@ def shim_source() -> str:
                              undefined=jinja2.StrictUndefined)
     kernels = [{"table": k.table, "member": k.member, "inputs": k.inputs,
                 "outputs": k.outputs, "frame": k.frame, "status": k.status,
-                "blocks": k.blocks,
+                "blocks": k.blocks, "configuration": k.configuration, "tangents": k.tangents,
                 "arguments": k.c_arguments(), "out_widths": k.c_widths()}
                for k in KERNELS.values()]
     max_arrays = max(max(len(k.inputs) + 1, len(k.outputs)) for k in KERNELS.values())
@@ -212,12 +212,27 @@ def _call_for(shapes: tuple, dtype: str):
 
 
 def call_kernel(kernel_id: int, kernel: Kernel, slot: int, key: int, inputs: list,
-                p, frame: int, lead: tuple[int, ...], widths: list[int], dtype) -> list:
+                p, frame: int, lead: tuple[int, ...], widths: list[int], dtype,
+                floating: np.ndarray) -> list:
     """The shim's handler on `inputs` (arrays of one dtype, leading dimensions that
-    broadcast to `lead`) and p (or None: the module's defaults): flat outputs (lead, width)."""
+    broadcast to `lead`) and p (or None: the module's defaults): flat outputs (lead, width).
+    `floating`: the model's floating joints (`floating_attribute`)."""
     args = list(inputs) + ([] if p is None else [p])
     call = _call_for(tuple(lead + (w,) for w in widths), np.dtype(dtype).name)
     out = call(*args, model=np.int64(slot), key=np.int64(key),
                kernel=np.int32(kernel_id), frame=np.int32(frame),
-               has_p=np.int32(0 if p is None else 1))
+               has_p=np.int32(0 if p is None else 1), floating=floating)
     return list(out)
+
+
+def floating_attribute(joints) -> np.ndarray:
+    """The shim's `floating` attribute: the number of floating joints, then each one's
+    (q offset, v offset), in joint order."""
+    pairs, iq, iv = [], 0, 0
+    for joint in joints:
+        if joint.type == "floating":
+            pairs += [iq, iv]
+            iq, iv = iq + 7, iv + 6
+        else:
+            iq, iv = iq + 1, iv + 1
+    return np.asarray([len(pairs) // 2, *pairs], dtype=np.int64)

@@ -34,7 +34,7 @@ class Ops:
         info = dyn.info
         self.sizes = {"nq": dyn.nq, "nv": dyn.nv, "np": len(dyn.parameters),
                       "nb": len(info.bodies), "nf": len(info.frames),
-                      "nreg": len(info.regressor_names)}
+                      "nreg": len(info.regressor_names), "njac": dyn.nq + 2 * dyn.nv}
 
     def shapes(self, method: Method) -> list[tuple[int, ...]]:
         return output_shapes(KERNELS[method.kernel], self.sizes)
@@ -44,11 +44,13 @@ class Ops:
         raise NotImplementedError
 
     def forward_dynamics_jacobian(self, q, qd, tau, p=None):
-        """[∂q̈/∂v | ∂q̈/∂q̇ | M⁻¹] side by side, (..., nv, 3 nv): forward dynamics'
-        derivative blocks as the one matrix its JVP rule multiplies."""
-        from gagen.jax.rules import side_by_side
+        """[∂q̈/∂q | ∂q̈/∂q̇ | M⁻¹] side by side, (..., nv, nq + 2 nv), ∂q̈/∂q by q's own
+        entries: forward dynamics' derivative blocks as the one matrix its JVP rule
+        multiplies."""
+        from gagen.jax.rules import by_configuration, side_by_side
 
-        return side_by_side(list(self.call("forward_dynamics_derivatives", q, qd, tau, p=p)))
+        dq, dqd, minv = self.call("forward_dynamics_derivatives", q, qd, tau, p=p)
+        return side_by_side([by_configuration(self.dyn.info.joints, q, dq), dqd, minv])
 
     @staticmethod
     def lead(arrays) -> tuple[int, ...]:
@@ -78,11 +80,12 @@ class FFIOps(Ops):
     target = "ffi"
 
     def __init__(self, dyn, cache_dir=None):
-        from gagen.jax.ffi import shim
+        from gagen.jax.ffi import floating_attribute, shim
 
         super().__init__(dyn, cache_dir)
         self.shim = shim(cache_dir)
         self.ids = {name: k for k, name in enumerate(KERNELS)}
+        self.floating = floating_attribute(dyn.info.joints)
         self._tables: dict[str, tuple[int, int]] = {}
 
     def table(self, kind: str) -> tuple[int, int]:
@@ -103,10 +106,19 @@ class FFIOps(Ops):
         return self.results(method, self._kernel(method.kernel, states, p, frame))
 
     def forward_dynamics_jacobian(self, q, qd, tau, p=None):
-        """The derivative kernel's blocks joined side by side in the shim's C loop (one
-        pass over the batch, no join by XLA)."""
+        """The derivative kernel's blocks, the first by q's own entries, joined side by
+        side in the shim's C loop (one pass over the batch, no map or join by XLA)."""
         (jacobian,) = self._kernel("forward_dynamics_jacobian", (q, qd, tau), p, -1)
         return jacobian
+
+    def jacobian_times(self, q, qd, tau, tangents, p=None):
+        """That Jacobian times tangents (..., n n), each state's n x n row-major (row b the
+        tangent b, n = nq + 2 nv), in the same C loop: (..., nv, n), the tangents' index
+        last; the Jacobian itself where they are the identity (gagen.jax.product)."""
+        tangents = tangents.astype(_dtype((q,), p))
+        (out,) = self._kernel("forward_dynamics_jacobian_product", (q, qd, tau, tangents), p,
+                              -1)
+        return out
 
     def _kernel(self, name: str, states, p, frame: int) -> list:
         """The outputs of KERNELS[name] at states, shaped (lead..., per-state shape)."""
@@ -119,7 +131,7 @@ class FFIOps(Ops):
         lead = self.lead(arrays)
         shapes = output_shapes(kernel, self.sizes)
         flat = call_kernel(self.ids[name], kernel, slot, key, list(states), p, frame,
-                           lead, [int(np.prod(s)) for s in shapes], dtype)
+                           lead, [int(np.prod(s)) for s in shapes], dtype, self.floating)
         return [f.reshape(lead + s) for f, s in zip(flat, shapes)]
 
 

@@ -50,7 +50,11 @@ _INPUTS = ("q", "qd", "qdd", "tau", "p")
 # an array of its own (_Writer.body). Measured on the Panda arm's forward dynamics (4,096
 # states): 8 keeps 257 of the 457 values read twice or more, which ran 1.4x faster than keeping
 # all (fastest of 80 interleaved runs: 1.83 ms against 2.56 ms; 3, 16 and 32 were no faster).
-DUPLICATED = 8
+# On ANYmal C's forward dynamics 16 is faster than 8 (701 of XLA's loops instead of 758;
+# medians of interleaved runs, load 2-4 on 2 cores: 8.98 against 10.69 ms, and 9.83 against
+# 11.02 ms; 24 and 32 in between, 64 twice as slow), the Panda arm's the same (2.61 ms
+# both), the Panda's derivatives compile as fast (26-27 s CPU against 25-26 s).
+DUPLICATED = 16
 
 
 def _symbol_names(eqs, cse: CSEResult) -> dict[sp.Symbol, str]:

@@ -31,7 +31,12 @@ class Kernel:
     (after p) and then a reference (always LOCAL_WORLD_ALIGNED: the frame's origin, world
     axes, the Dynamics methods' default), whether it returns a status (0: success), and
     `blocks`: 0, or the number of square nv x nv blocks the member writes, which the shim
-    joins side by side (row by row) into the kernel's one output."""
+    joins side by side (row by row) into the kernel's one output, and `configuration`:
+    whether the shim writes the first of them by q's own entries (nq columns: a floating
+    joint's columns through its quaternion's rates, gagen.jax.rules.by_configuration).
+    `tangents`: whether the last state input is a (njac x njac) matrix of tangents (row b
+    the tangent b, passed to the shim, not to the member) that the shim multiplies each row
+    of the Jacobian by (gagen.jax.product). Sizes: a table's fields, and njac = nq + 2 nv."""
 
     table: str
     member: str
@@ -41,11 +46,14 @@ class Kernel:
     status: bool = False
     reference: bool = False
     blocks: int = 0
+    configuration: bool = False
+    tangents: bool = False
 
     def c_arguments(self) -> str:
         """The C call's arguments, from the shim's arrays `in` and `out` (or its square
         `block`s, for a kernel whose blocks are joined) and `frame`."""
-        names = [f"in[{k}]" for k in range(len(self.inputs) + 1)]
+        states = len(self.inputs) - (1 if self.tangents else 0)
+        names = [f"in[{k}]" for k in range(states)] + [f"in[{len(self.inputs)}]"]
         names += ["frame"] if self.frame else []
         names += [str(LOCAL_WORLD_ALIGNED)] if self.reference else []
         if self.blocks:
@@ -79,12 +87,18 @@ KERNELS: dict[str, Kernel] = {
                                            ("nq", "nv", "nv"),
                                            (("nv", "nv"), ("nv", "nv"), ("nv", "nv")),
                                            status=True),
-    # the same kernel, its three nv x nv blocks joined side by side into one (nv, 3 nv)
-    # Jacobian per state ([∂q̈/∂v | ∂q̈/∂q̇ | M⁻¹]): the form the JVP rule multiplies, written
-    # in the C loop (while the blocks are in cache) rather than joined by XLA over the batch
+    # the same kernel, its three nv x nv blocks joined side by side into one (nv, nq + 2 nv)
+    # Jacobian per state ([∂q̈/∂q | ∂q̈/∂q̇ | M⁻¹], ∂q̈/∂q by q's own entries): the form the
+    # JVP rule multiplies, written in the C loop (while the blocks are in cache) rather than
+    # mapped and joined by XLA in passes over the batch
     "forward_dynamics_jacobian": Kernel("derivatives", "forward_dynamics_derivatives",
-                                        ("nq", "nv", "nv"), (("nv", (3, "nv")),), status=True,
-                                        blocks=3),
+                                        ("nq", "nv", "nv"), (("nv", "njac"),), status=True,
+                                        blocks=3, configuration=True),
+    # the same Jacobian times tangents (njac x njac) in the same loop: jax.jacfwd's product
+    # by its basis without the Jacobian written out and read back (gagen.jax.product)
+    "forward_dynamics_jacobian_product": Kernel(
+        "derivatives", "forward_dynamics_derivatives", ("nq", "nv", "nv", "njac * njac"),
+        (("nv", "njac"),), status=True, blocks=3, configuration=True, tangents=True),
     "coriolis_matrix": Kernel("derivatives", "coriolis_matrix", ("nq", "nv"), (("nv", "nv"),)),
     "linearize": Kernel("derivatives", "linearize", ("nq", "nv", "nv"),
                         (((2, "nv"), (2, "nv")), ((2, "nv"), "nv")), status=True),

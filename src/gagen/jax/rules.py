@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from gagen.jax.product import jacobian_product
+
 
 def mv(A, x):
     """A @ x over leading dimensions: (..., m, n) by (..., n). For the dynamics' square
@@ -73,8 +75,8 @@ class Context:
         return found[0]
 
     def forward_dynamics_jacobian(self, q, qd, tau):
-        """[∂q̈/∂v | ∂q̈/∂q̇ | M⁻¹] (..., nv, 3 nv) at this point (Ops.forward_dynamics_jacobian),
-        kept as `call` keeps results."""
+        """[∂q̈/∂q | ∂q̈/∂q̇ | M⁻¹] (..., nv, nq + 2 nv) at this point, ∂q̈/∂q by q's own
+        entries (Ops.forward_dynamics_jacobian), kept as `call` keeps results."""
         key = ("forward_dynamics_jacobian", (id(q), id(qd), id(tau)))
         found = self._calls.get(key)
         if found is None:
@@ -89,27 +91,6 @@ class Context:
 
     def zeros(self, like):
         return jnp.zeros(like.shape[:-1] + (self.nv,), like.dtype)
-
-    def by_configuration(self, q, A):
-        """A (..., m, nv), a derivative by the velocity directions, as the derivative by
-        q's own entries (..., m, nq): A times the map `velocity` applies to dq, which is
-        the identity for 1-dof joints (elementwise products only: XLA fuses them)."""
-        if not self.floating:
-            return A
-        pieces, iq, iv = [], 0, 0
-        for joint in self.joints:
-            if joint.type != "floating":
-                pieces.append(A[..., iv: iv + 1])
-                iq, iv = iq + 1, iv + 1
-                continue
-            quat = q[..., iq + 3: iq + 7]
-            R, Q = rotation_and_rates(quat)
-            scale = 4.0 / jnp.sum(quat * quat, axis=-1)
-            # v_lin = Rᵀ dp: A_lin Rᵀ; v_ang = scale Qᵀ dquat: scale A_ang Qᵀ
-            pieces.append(_times_transpose(A[..., iv: iv + 3], R))
-            pieces.append(scale[..., None, None] * _times_transpose(A[..., iv + 3: iv + 6], Q))
-            iq, iv = iq + 7, iv + 6
-        return side_by_side(pieces)
 
     def velocity(self, q, dq):
         """The velocity tangent (..., nv) of a tangent dq (..., nq) of the configuration
@@ -132,6 +113,29 @@ class Context:
                 scale * mv(jnp.swapaxes(Q, -1, -2), dq[..., iq + 3: iq + 7]), lead + (3,)))
             iq += 7
         return jnp.concatenate(pieces, axis=-1)
+
+
+def by_configuration(joints, q, A):
+    """A (..., m, nv), a derivative by the velocity directions, as the derivative by q's
+    own entries (..., m, nq): A times the map `Context.velocity` applies to dq, which is the
+    identity for 1-dof joints (elementwise products only: XLA fuses them). The FFI shim
+    does the same in C for forward dynamics' Jacobian (templates/ffi_shim.cc.j2)."""
+    if not any(joint.type == "floating" for joint in joints):
+        return A
+    pieces, iq, iv = [], 0, 0
+    for joint in joints:
+        if joint.type != "floating":
+            pieces.append(A[..., iv: iv + 1])
+            iq, iv = iq + 1, iv + 1
+            continue
+        quat = q[..., iq + 3: iq + 7]
+        R, Q = rotation_and_rates(quat)
+        scale = 4.0 / jnp.sum(quat * quat, axis=-1)
+        # v_lin = Rᵀ dp: A_lin Rᵀ; v_ang = scale Qᵀ dquat: scale A_ang Qᵀ
+        pieces.append(_times_transpose(A[..., iv: iv + 3], R))
+        pieces.append(scale[..., None, None] * _times_transpose(A[..., iv + 3: iv + 6], Q))
+        iq, iv = iq + 7, iv + 6
+    return side_by_side(pieces)
 
 
 def _times_transpose(A, B):
@@ -183,18 +187,23 @@ def forward_dynamics(ctx, x, dx, out):
     """q̈'s tangent as one product: the Jacobian's blocks of the moving arguments side by
     side, [∂q̈/∂q | ∂q̈/∂q̇ | M⁻¹] (…, nv, nq + 2 nv), times their tangents stacked. The
     configuration block is by q's own entries (the velocity map folded into the matrix,
-    per state), so under jax.jacfwd the stacked tangents are jacfwd's basis, the same for
+    per state, in the FFI shim's C loop), so under jax.jacfwd the stacked tangents are jacfwd's basis, the same for
     every state, and the product is one dot of all states' rows by that basis, written in
     the Jacobian's own layout: no per-block products, sums or transposes over the batch."""
     q, qd, tau = x["q"], x["qd"], x["tau"]
     moving = [a for a in ("q", "qd", "tau") if dx[a] is not None]
     if not moving:
         return None
+    if len(moving) == 3 and ctx.ops.target == "ffi":
+        # one primitive, whose batching rule under jax.jacfwd is one FFI call of the
+        # Jacobian times jacfwd's basis (gagen.jax.product)
+        tangent = side_by_side([dx[a] for a in moving])
+        return jacobian_product(ctx.ops, q, qd, tau, ctx.p, tangent)
     jacobian = ctx.forward_dynamics_jacobian(q, qd, tau)
-    if len(moving) < 3 or ctx.floating:
-        nv = ctx.nv
-        block = {"q": ctx.by_configuration(q, jacobian[..., :nv]),
-                 "qd": jacobian[..., nv: 2 * nv], "tau": jacobian[..., 2 * nv:]}
+    if len(moving) < 3:
+        nq, nv = q.shape[-1], ctx.nv
+        block = {"q": jacobian[..., :nq], "qd": jacobian[..., nq: nq + nv],
+                 "tau": jacobian[..., nq + nv:]}
         jacobian = side_by_side([block[a] for a in moving])
     tangent = side_by_side([dx[a] for a in moving])
     return jnp.einsum("...ij,...j->...i", jacobian, tangent)
@@ -314,7 +323,7 @@ def _parameters_forward_dynamics(ctx, x, out, dpi):
     dtau = mv(ctx.call("regressor", q, x["qd"], out), dpi)
     jacobian = ctx.called("forward_dynamics_jacobian", q, x["qd"], x["tau"])
     if jacobian is not None:  # the state's term computed M⁻¹ already
-        return -mv(jacobian[..., 2 * ctx.nv:], dtau)
+        return -mv(jacobian[..., q.shape[-1] + ctx.nv:], dtau)
     M = ctx.call("mass_matrix", q)
     M, dtau = jnp.broadcast_arrays(M, dtau[..., None])
     return -jnp.linalg.solve(M, dtau)[..., 0]
