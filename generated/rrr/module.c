@@ -94,7 +94,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "466b89571584ec04c5424e200b209975c32c9cd03083b6955f4a0093e1b9ed11") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "c1f53e8bf12beb60f6555ad911c941e4e7fe38da99180a8603d1e11b8d21dd6a") < 0) {
         Py_DECREF(module);
         return NULL;
     }

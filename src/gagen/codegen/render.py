@@ -558,7 +558,7 @@ KERNEL_ARRAYS = {
 # Measured on a 50-link chain: inverse dynamics 2.04 -> 1.54 us and forward dynamics
 # 4.84 -> 3.79 us per call, for 1.8 times their compile time.
 LOOPED_KERNELS = ("inverse_dynamics", "gravity", "position", "velocity", "velocity_aba",
-                  "mass_matrix")
+                  "mass_matrix", "mass_forcing")
 
 
 class _Kernels:
@@ -848,7 +848,11 @@ def generate(eqs: Equations, module_name: str, key: str,
         **_regressor_blocks(eqs, kernels, config, reg, reg_parameters),
         **_centroidal_blocks(eqs, kernels, config),
     }
-    if model.constraints:
+    parents = dof_parents(info.bodies, n)
+    lower_entries = mass_entries_on_paths(out["mass_matrix"], parents)
+    by_factors = forward_dynamics_by_factors(kernels.cse, [e for _, _, e in lower_entries],
+                                             parents)
+    if model.constraints or by_factors:
         # the constrained dynamics need M, F and the constrained frames' poses, motions and
         # Jacobian columns (symbolic.frames.constraint_frame_terms) at each call: one
         # program for them shares their kinematics (ANYmal C: 4495 operations instead of
@@ -858,12 +862,10 @@ def generate(eqs: Equations, module_name: str, key: str,
         # 34.2k instructions in C, with the placements' step before). Of M, the lower
         # triangle only, where the factorisation reads it: each entry on a coordinate's
         # path to the world (the others are zero and never read), a zero one written as
-        # such, no clearing of all n^2 first (2.79 -> 2.71 us in C, medians of 9 runs)
-        parents = dof_parents(info.bodies, n)
-        chains = [{r, *_ancestors(parents, r)} for r in range(n)]
-        lower_entries = [(r, s, e) for (r, s), e in zip(lower, out["mass_matrix"])
-                         if e != 0 or s in chains[r]]
-        terms = out["constraint_frames"]
+        # such, no clearing of all n^2 first (2.79 -> 2.71 us in C, medians of 9 runs).
+        # The forward dynamics of a model without constraints take the same program where
+        # it is cheaper than the articulated-body one (forward_dynamics_by_factors)
+        terms = out.get("constraint_frames", [])
         blocks["mass_forcing"] = kernels.block(
             "mass_forcing",
             [e for _, _, e in lower_entries] + list(out["forcing"]) + list(terms),
@@ -898,6 +900,8 @@ def generate(eqs: Equations, module_name: str, key: str,
         "centroidal": info.moving_tree,
         "dof_parents": dof_parents(info.bodies, n),
         "ltdl_plan": ltdl_plan(dof_parents(info.bodies, n)),
+        # forward_dynamics() by M = L^T D L (constraints.c) instead of the stages
+        "fd_by_factors": by_factors,
         # the constraints: numbers only (their names stay in the manifest)
         **constraint_context(info, list(model.parameters)),
         "jointed": info.jointed_coordinates(),
@@ -972,6 +976,57 @@ def ltdl_plan(parents: list[int]) -> list[tuple[int, list[tuple[int, list[int]]]
         if count > LTDL_UNROLLED:
             return None
     return plan
+
+
+def mass_entries_on_paths(lower: list[sp.Expr], parents: list[int]
+                          ) -> list[tuple[int, int, sp.Expr]]:
+    """(r, s, entry) of M's lower triangle (row by row) where M = L^T D L reads it: each
+    entry on a coordinate's path to the world, and the other non-zero ones."""
+    n = len(parents)
+    chains = [{r, *_ancestors(parents, r)} for r in range(n)]
+    pairs = [(r, s) for r in range(n) for s in range(r + 1)]
+    return [(r, s, e) for (r, s), e in zip(pairs, lower) if e != 0 or s in chains[r]]
+
+
+def tree_factored(cse: CSEResult, model) -> list[int] | None:
+    """The tree's parents (per velocity coordinate) where forward dynamics go by M's
+    factors along the tree (forward_dynamics_by_factors), else None: what the C and the
+    printed JAX of the model both follow."""
+    parents = dof_parents(ModelInfo.from_model(model).bodies, len(cse.outputs["forcing"]))
+    entries = mass_entries_on_paths(cse.outputs["mass_matrix"], parents)
+    if forward_dynamics_by_factors(cse, [e for _, _, e in entries], parents):
+        return parents
+    return None
+
+
+def forward_dynamics_by_factors(cse: CSEResult, mass_entries: list[sp.Expr],
+                                parents: list[int]) -> bool:
+    """Whether forward_dynamics() is cheaper as M and F from one program, M = L^T D L along
+    the tree (no fill-in) and two solves, than by the articulated-body program of the
+    recursive derivation: by their operation counts (a derivation without that program
+    keeps its stages). The factorisation costs, per coordinate k and ancestor i, the
+    entries of i's path; the solves one multiply-add per entry of L.
+
+    ANYmal C: 4665 + 690 operations against 7138, and 0.96 against 1.67 us per state
+    (stacked calls of 1000 states, alternating the two builds); the Panda (a chain of 9)
+    2415 + 237 against 3147, 0.36 against 0.43 us; UR5 0.17 against 0.28 us; Talos reduced
+    (38) 10171 + the tree's against 14260, 4.04 against 3.92 us (its programs are many
+    times the instruction cache: as fast either way)."""
+    out = cse.outputs
+    if "forward_dynamics" not in out:
+        return False
+    aba = out["forward_dynamics"] + out["pivots"]
+    mass_forcing = list(mass_entries) + list(out["forcing"])
+    factor = sum(len(_ancestors(parents, i)) + 2 for k in range(len(parents))
+                 for i in _ancestors(parents, k))
+    solves = 2 * sum(len(_ancestors(parents, k)) for k in range(len(parents))) + len(parents)
+    return (_program_operations(cse, mass_forcing) + factor + solves
+            < _program_operations(cse, aba))
+
+
+def _program_operations(cse: CSEResult, outputs: list[sp.Expr]) -> int:
+    """The operations of the outputs and of the assignments they need."""
+    return operation_count([a.expr for a in cse.needed(outputs)] + list(outputs))
 
 
 def constraint_context(info: ModelInfo, parameters: list[str]) -> dict:

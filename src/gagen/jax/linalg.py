@@ -109,3 +109,37 @@ def forward_derivatives(factors, dtau_dq, dtau_dqd, plan):
     eye = jnp.broadcast_to(jnp.eye(n, dtype=dq.dtype), lead + (n, n))
     Minv = _solve_rows(factors, [eye[..., i, :] for i in range(n)], plan)
     return dq, dqd, Minv
+
+
+def solve_tree(lower, F, parents):
+    """M⁻¹ F for M given by its lower triangle, by M = Lᵀ D L along the tree (Featherstone's
+    factorisation: no fill-in outside each coordinate's ancestors) and the solves
+    x = L⁻¹ D⁻¹ L⁻ᵀ F, the steps and sums of the C's gagen_ltdl, gagen_cn_back and
+    gagen_cn_forward in their order. `parents`: per coordinate the one before it on its
+    path to the world (-1: none)."""
+    n = len(parents)
+
+    def ancestors(k):
+        i = parents[k]
+        while i >= 0:
+            yield i
+            i = parents[i]
+
+    A = {(i, j): lower[..., lower_index(i, j)] for i in range(n)
+         for j in (i, *ancestors(i))}
+    for k in reversed(range(n)):
+        r = 1.0 / A[k, k]
+        for i in ancestors(k):
+            a = A[k, i] * r
+            for j in (i, *ancestors(i)):
+                A[i, j] = A[i, j] - A[k, j] * a
+            A[k, i] = a
+    x = [F[..., j] for j in range(n)]
+    for k in reversed(range(n)):
+        for i in ancestors(k):
+            x[i] = x[i] - A[k, i] * x[k]
+    x = [x[k] / A[k, k] for k in range(n)]
+    for k in range(n):
+        for i in ancestors(k):
+            x[k] = x[k] - A[k, i] * x[i]
+    return stack(x, (n,))

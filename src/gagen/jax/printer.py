@@ -27,7 +27,7 @@ from gagen import __version__
 from gagen.codegen.cse import CSEResult
 from gagen.codegen.derivatives import derivative_program
 from gagen.codegen.ldlt import ldlt_plan
-from gagen.codegen.render import GagenCPrinter, c_identifier
+from gagen.codegen.render import GagenCPrinter, c_identifier, tree_factored
 from gagen.errors import BuildError
 from gagen.symbolic.differentiate import needed_definitions
 from gagen.symbolic.frames import add_frame_kinematics
@@ -235,7 +235,18 @@ def print_main(eqs) -> str:
                {"tau": (n,)})
     w.function("gravity", ("q", "p"), {"G": out["gravity"]}, {"G": (n,)})
     w.function("energy", ("q", "qd", "p"), {"TV": out["energy"]}, {"TV": (2,)})
-    if "forward_dynamics" in out:
+    tree = tree_factored(cse, eqs.model)
+    if tree is not None:
+        # M and F, then M = Lᵀ D L along the tree and the solves, as the C does where they
+        # cost fewer operations than the articulated-body program
+        w.lines += [f"PARENTS = {tuple(tree)!r}", ""]
+        w.function("_mass_forcing", ("q", "qd", "tau", "p"),
+                   {"M": out["mass_matrix"], "F": out["forcing"]},
+                   {"M": _lower_shape(n), "F": (n,)})
+        w.lines += ["def forward_dynamics(q, qd, tau, p):",
+                    "    M, F = _mass_forcing(q, qd, tau, p)",
+                    "    return _linalg.solve_tree(M, F, PARENTS)", ""]
+    elif "forward_dynamics" in out:
         # the articulated-body algorithm's program (recursive derivation)
         w.function("forward_dynamics", ("q", "qd", "tau", "p"),
                    {"qdd": out["forward_dynamics"]}, {"qdd": (n,)})
