@@ -236,28 +236,24 @@ def print_main(eqs) -> str:
     w.function("gravity", ("q", "p"), {"G": out["gravity"]}, {"G": (n,)})
     w.function("energy", ("q", "qd", "p"), {"TV": out["energy"]}, {"TV": (2,)})
     tree = tree_factored(cse, eqs.model)
-    if tree is not None:
-        # M and F, then M = Lᵀ D L along the tree and the solves, as the C does where they
-        # cost fewer operations than the articulated-body program
-        w.lines += [f"PARENTS = {tuple(tree)!r}", ""]
-        w.function("_mass_forcing", ("q", "qd", "tau", "p"),
-                   {"M": out["mass_matrix"], "F": out["forcing"]},
-                   {"M": _lower_shape(n), "F": (n,)})
-        w.lines += ["def forward_dynamics(q, qd, tau, p):",
-                    "    M, F = _mass_forcing(q, qd, tau, p)",
-                    "    return _linalg.solve_tree(M, F, PARENTS)", ""]
-    elif "forward_dynamics" in out:
+    if tree is None and "forward_dynamics" in out:
         # the articulated-body algorithm's program (recursive derivation)
         w.function("forward_dynamics", ("q", "qd", "tau", "p"),
                    {"qdd": out["forward_dynamics"]}, {"qdd": (n,)})
     else:
-        # M and F, then the LDLᵀ solve with the plan of the C (gagen.jax.linalg)
+        # M and F, then the C's solve: M = Lᵀ D L along the tree where that costs fewer
+        # operations than the articulated-body program, else the LDLᵀ plan of the C
+        # (gagen.jax.linalg)
+        if tree is not None:
+            w.lines += [f"PARENTS = {tuple(tree)!r}", ""]
+        solve = ("_linalg.solve_tree(M, F, PARENTS)" if tree is not None
+                 else "_linalg.solve_lower(M, F, PLAN)")
         w.function("_mass_forcing", ("q", "qd", "tau", "p"),
                    {"M": out["mass_matrix"], "F": out["forcing"]},
                    {"M": _lower_shape(n), "F": (n,)})
         w.lines += ["def forward_dynamics(q, qd, tau, p):",
                     "    M, F = _mass_forcing(q, qd, tau, p)",
-                    "    return _linalg.solve_lower(M, F, PLAN)", ""]
+                    f"    return {solve}", ""]
     w.function("placements", ("q", "p"), {"X": out["placements"]},
                {"X": (len(out["placements"]),)})
     w.function("frame_offsets", ("p",), {"F": out["frame_offsets"]},
