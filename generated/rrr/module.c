@@ -94,7 +94,7 @@ PyMODINIT_FUNC PyInit_gagen_rrr_4824b7a90dab(void)
         Py_DECREF(module);
         return NULL;
     }
-    if (PyModule_AddStringConstant(module, "KEY", "c1f53e8bf12beb60f6555ad911c941e4e7fe38da99180a8603d1e11b8d21dd6a") < 0) {
+    if (PyModule_AddStringConstant(module, "KEY", "7c2d5acefe6a7ced44b45621d4d1b6e123e2100232a89f1d8ab3cf4a96f9b57e") < 0) {
         Py_DECREF(module);
         return NULL;
     }
