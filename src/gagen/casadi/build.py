@@ -70,21 +70,83 @@ def library_key(dyn, flags: list[str]) -> str:
     return h.hexdigest()
 
 
-def inertial_parameters(dyn, states: int = 3) -> list[bool]:
-    """Per parameter: whether the regressor Y is independent of it (then dtau/dp = Y dpi/dp
-    for it): Y unchanged, to the bit, at random states when the parameter alone changes."""
+def parameter_classes(dyn, states: int = 3) -> list[int]:
+    """Per parameter, its class (gagen.casadi.table's flags), which picks how the wrapper
+    computes its Jacobian columns, told from the compiled model at random states (q, qd,
+    qdd all non-zero) by what changes, to the bit, when the parameter alone changes:
+
+    - GRAVITY: the regressor Y changes, affinely, and neither the bodies' placements, the
+      frames' offsets nor pi do (the model's gravity, `g`);
+    - SIMULATION: `coulomb_width` (FRICTION_WIDTH), when nothing changes with it (only
+      simulations use it);
+    - BODY, ARMATURE, DRAG (or several): only pi changes, and as a polynomial of degree 4 or
+      less (its fifth difference vanishes): the flags of the entries of pi that change
+      (a body's ten, armature, damping and friction);
+    - KINEMATIC: anything else (the placements change: lengths, angles; or nothing seen to
+      change, which costs a few evaluations and is never wrong).
+    """
+    from ..manifest import FRICTION_WIDTH
+    from .table import Param
+
+    names = list(dyn.parameters)
     rng = np.random.default_rng(0)
     n = dyn.nv
     q = dyn.integrate(np.tile(dyn.neutral(), (states, 1)), rng.uniform(-1, 1, (states, n)))
     qd, qdd = rng.uniform(-1, 1, (2, states, n))
+    kinds = np.array([Param.ARMATURE if name.startswith("armature_") else
+                      Param.DRAG if name.startswith(("damping_", "friction_")) else Param.BODY
+                      for name in dyn.regressor_names], dtype=int)
+
+    def seen(p):
+        return (np.concatenate([np.ravel(dyn._placements(q, p)), dyn._frame_offsets(p)]),
+                dyn.regressor(q, qd, qdd, p), dyn.regressor_parameters(p))
+
     p0 = dyn.parameter_vector()
-    Y0 = dyn.regressor(q, qd, qdd, p0)
-    flags = []
+    kinematics0, Y0, pi0 = seen(p0)
+    classes = []
     for k in range(len(p0)):
         p = p0.copy()
         p[k] = p0[k] * 1.5 + 0.25
-        flags.append(bool(np.array_equal(dyn.regressor(q, qd, qdd, p), Y0)))
-    return flags
+        kinematics, Y, pi = seen(p)
+        moved = ~np.equal(pi, pi0)
+        columns = ~np.equal(Y, Y0).reshape(-1, len(pi0)).all(axis=0)
+        if not np.array_equal(kinematics, kinematics0) or (moved.any() and columns.any()):
+            classes.append(Param.KINEMATIC)
+        elif columns.any():
+            classes.append(Param.GRAVITY if _affine(dyn, q, qd, qdd, p0, k)
+                           else Param.KINEMATIC)
+        elif moved.any() and _polynomial(dyn, p0, k):
+            classes.append(int(np.bitwise_or.reduce(kinds[moved])))
+        elif not moved.any() and names[k] == FRICTION_WIDTH:
+            classes.append(Param.SIMULATION)
+        else:
+            classes.append(Param.KINEMATIC)
+    return [int(c) for c in classes]
+
+
+def _affine(dyn, q, qd, qdd, p0, k) -> bool:
+    """Whether the regressor is affine in parameter k: its second difference, at steps of
+    max(|p_k|, 1), vanishes to rounding."""
+    h = max(abs(p0[k]), 1.0)
+    Y = [dyn.regressor(q, qd, qdd, _stepped(p0, k, s * h)) for s in (-1, 0, 1)]
+    scale = max(float(np.abs(y).max(initial=0.0)) for y in Y)
+    return float(np.abs(Y[0] - 2 * Y[1] + Y[2]).max(initial=0.0)) <= 1e-11 * max(scale, 1e-300)
+
+
+def _polynomial(dyn, p0, k) -> bool:
+    """Whether pi is a polynomial of degree 4 or less in parameter k: its fifth difference,
+    at the wrapper's stencil's step (0.25 max(|p_k|, 1)), vanishes to rounding."""
+    h = 0.25 * max(abs(p0[k]), 1.0)
+    pis = [dyn.regressor_parameters(_stepped(p0, k, s * h)) for s in range(-3, 3)]
+    fifth = sum(c * pi for c, pi in zip((-1, 5, -10, 10, -5, 1), pis))
+    scale = max(float(np.abs(pi).max(initial=0.0)) for pi in pis)
+    return float(np.abs(fifth).max(initial=0.0)) <= 1e-10 * max(scale, 1e-300)
+
+
+def _stepped(p0, k, step):
+    p = p0.copy()
+    p[k] = p0[k] + step
+    return p
 
 
 def write_sources(dyn, folder: Path) -> list[str]:
@@ -101,7 +163,7 @@ def write_sources(dyn, folder: Path) -> list[str]:
     headers = [files[name].decode() for name in (f"{ident}.h", f"{ident}_derivatives.h")
                if name in files]
     generated = generate_casadi(dyn.info, ident, len(dyn.regressor_names),
-                                inertial_parameters(dyn),
+                                parameter_classes(dyn),
                                 kernels=declared_kernels(ident, headers))
     for name, text in generated.items():
         files[name] = text.encode()

@@ -18,8 +18,11 @@ import jinja2
 
 from .. import __version__
 from ..manifest import JOINT_KINDS, ModelInfo
-from .table import ENTRIES, Entry
+from .table import ENTRIES, INERTIA_METHODS, INERTIAL, Entry, Param
 
+# a parameter's class: one flag of gagen.casadi.table's, or several inertial ones
+_CLASSES = {int(flag) for flag in Param} | {c for c in range(1, int(INERTIAL) + 1)
+                                            if not c & ~int(INERTIAL)}
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 _FLOATING = JOINT_KINDS["floating"]
 
@@ -139,21 +142,24 @@ def declared_kernels(ident: str, headers: list[str]) -> set[str]:
     return {match.group(1) for text in headers for match in pattern.finditer(text)}
 
 
-def generate_casadi(info: ModelInfo, ident: str, nreg: int, inertial: list[bool],
+def generate_casadi(info: ModelInfo, ident: str, nreg: int, classes: list[int],
                     entries: tuple[Entry, ...] = ENTRIES,
                     kernels: set[str] | None = None) -> dict[str, str]:
     """The wrapper's C file and header, {file name: text}, for a model with manifest `info`
     whose kernels are named `<ident>_...` and whose regressor has `nreg` columns;
-    `inertial[k]`: whether the regressor is independent of parameter k (its column of
-    dtau/dp is then Y dpi/dp). With `kernels` (`declared_kernels`), the entries that need
-    a kernel the model's C lacks are left out."""
+    `classes[k]`: parameter k's class (gagen.casadi.table's flags, from
+    gagen.casadi.build.parameter_classes), which picks how its Jacobian columns are
+    computed. With `kernels` (`declared_kernels`), the entries that need a kernel the
+    model's C lacks are left out."""
     prefix = prefix_of(ident)
     if kernels is not None:
         entries = tuple(e for e in entries if set(e.requires) <= kernels)
     defaults = [value for _, value in info.parameters]
     nq, nv, np_ = info.nq, info.dof, len(defaults)
-    if len(inertial) != np_:
-        raise ValueError(f"inertial has {len(inertial)} entries for {np_} parameters")
+    if len(classes) != np_:
+        raise ValueError(f"classes has {len(classes)} entries for {np_} parameters")
+    if any(c not in _CLASSES for c in classes):
+        raise ValueError("a parameter's class is not one of gagen.casadi.table's")
     nframes = len(info.frames)
     sizes = {"nq": nq, "nv": nv, "np": np_, "nreg": nreg}
     patterns = _Patterns()
@@ -179,7 +185,8 @@ def generate_casadi(info: ModelInfo, ident: str, nreg: int, inertial: list[bool]
         "max_out": max(len(e.outputs) for e in entries),
         "zeros": max(nq, nv, np_, 1),
         "defaults": [_c_number(v) for v in defaults],
-        "inertial": [1 if flag else 0 for flag in inertial] or [0],
+        "classes": [int(c) for c in classes] or [0],
+        "nbodies": len(info.moving_bodies),
         "plain": plain_coordinates(info),
         "floating": info.floating_joints(),
         "levels": frame_levels(info),
@@ -208,10 +215,16 @@ def _work_sizes(entry: Entry, ins, outs, sizes, with_p: bool) -> dict[str, int]:
     widths = [nv if k == 0 and entry.tangent and entry.jacobian else n
               for k, (_, n) in enumerate(ins)]
     blocks = sum(m * (sum(widths) + (np_ if with_p else 0)) for m in numel)
-    body = entry.work_size({**sizes, "central": central,
-                            "regressor_dp": nv * nreg + nreg * np_ + np_ + nreg}, with_p)
+    regressor_dp = nv * nreg + nreg * np_ + np_ + nreg
+    mass_matrix_dp = 2 * nv * nreg + nreg * np_ + np_ + nreg + nv + nv * np_
+    body = entry.work_size({**sizes, "central": central, "regressor_dp": regressor_dp,
+                            "mass_matrix_dp": mass_matrix_dp,
+                            "delassus_dp": nv * nv * (np_ + 1) + 18 * nv + mass_matrix_dp},
+                           with_p)
+    # gc_p_columns: p stepped, the value at p and at one step, pi twice
+    p_columns = np_ + 2 * sum(numel) + 2 * nreg + 8 if with_p else 0
     return {"value": sum(numel) + 8,
-            "jacobian": sum(numel) + blocks + body + 2 * central + widest + 64}
+            "jacobian": sum(numel) + blocks + body + 2 * central + widest + p_columns + 64}
 
 
 def _rendered_entry(entry: Entry, ident: str, ins, outs) -> dict:
@@ -221,6 +234,7 @@ def _rendered_entry(entry: Entry, ident: str, ins, outs) -> dict:
     return {"name": entry.name, "doc": entry.doc, "inputs": entry.inputs,
             "outputs": entry.outputs, "value": c(entry.value), "jacobian": c(entry.jacobian),
             "p_jacobian": c(entry.p_jacobian), "tangent": entry.tangent,
+            "depends": int(entry.depends), "inertia": INERTIA_METHODS.index(entry.inertia),
             "per_frame": entry.per_frame,
             "in_sizes": [n for _, n in ins], "out_rows": [r for _, r, _ in outs],
             "out_cols": [col for _, _, col in outs]}

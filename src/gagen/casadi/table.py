@@ -18,11 +18,27 @@ Conventions of the C bodies (see templates/casadi.c.j2):
   derivative kernels compute (Pinocchio's convention for a floating joint); the wrapper maps
   them onto q's `nq` entries (`tangent` below). An entry without a Jacobian body gets central
   differences of its value body, by every input's entries.
-- The blocks by `p`: an entry's `p_jacobian` body fills `D_<output>_p` for the inertial
-  parameters (the mask `gc_inertial`: the parameters that the regressor Y does not depend
-  on, for which dtau/dp = Y dpi/dp); the wrapper fills every other column (the kinematic
-  parameters: lengths, gravity) by central differences of the value body. Without a
-  `p_jacobian` body every column of p is by central differences.
+- The blocks by `p`, column by column, by what the parameter is to the entry (the classes
+  below; `gagen.casadi.build.parameter_classes` tells a model's, and the wrapper's
+  `gc_p_columns` picks the method, templates/casadi.c.j2):
+  * a class the entry's `depends` does not name: the column is zero by structure, written
+    without an evaluation (frame kinematics do not depend on masses nor on gravity; M, C,
+    the centroidal quantities and the Delassus matrix not on gravity; only the inverse and
+    forward dynamics on damping and friction);
+  * gravity `g`: every quantity depends on it affinely (the dynamics see gravity only as
+    the base's acceleration -g), so (X(g + h) - X(g)) / h is the column, one evaluation,
+    exact up to rounding;
+  * the inertial classes (body, armature, drag: parameters that the regressor Y and the
+    placements do not depend on, and on which pi depends as a polynomial of degree 4 or
+    less): the entry's `p_jacobian` body where it has one (dtau/dp = Y dpi/dp through the
+    regressor, -M^-1 dtau/dp, dM/dp = (Y(q, 0, e_j) - Y(q, 0, 0)) dpi/dp, the Delassus
+    matrix's -Y^T dM Y); else `inertia` says how: "polynomial" (a value linear in pi, hence
+    of degree <= 4 in each parameter: the five-point stencil is exact whatever its step),
+    or "quotient" (a centroidal value X = P / D, D the total mass, P polynomial: the
+    stencil of D X, and dX = (d(D X) - X dD) / D);
+  * kinematic (lengths, angles of a model file's joints; anything else): the five-point
+    stencil with a small step: exact for values of degree <= 4 in the parameter (a length
+    enters translations linearly and inertias as m L^2), O(h^4) otherwise.
 - `GC_LWA` after a frame number passes LOCAL_WORLD_ALIGNED to the frame kernels that take
   a reference (and nothing to those that do not).
 - `GC_TAKE(ptr, n)` takes n doubles of CasADi's work vector (the function fails, returning
@@ -36,7 +52,27 @@ gagen's derivative kernels, or None for central differences).
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
+
+
+class Param(enum.IntFlag):
+    """The classes of parameters (the same numbers in templates/casadi.c.j2): a parameter
+    is of one class; an entry's `depends` is the union of those its value depends on."""
+
+    KINEMATIC = 1       # lengths, angles: the placements depend on it (or anything else)
+    GRAVITY = 2         # the model's gravity g
+    BODY = 4            # a body's mass, centre of mass, inertia (pi's ten per body)
+    ARMATURE = 8
+    DRAG = 16           # joint damping and friction
+    SIMULATION = 32     # coulomb_width: the width of the smoothed sign of friction that
+                        # only simulations use (no function here: they take sign(qd))
+
+
+INERTIAL = Param.BODY | Param.ARMATURE | Param.DRAG
+EVERY = Param.KINEMATIC | Param.GRAVITY | INERTIAL
+# how an entry without a `p_jacobian` body gets its columns by the inertial parameters
+INERTIA_METHODS = ("p_jacobian", "polynomial", "quotient")
 
 
 @dataclass(frozen=True)
@@ -64,6 +100,10 @@ class Entry:
     work: object = None
     p_work: object = None
     per_frame: bool = False
+    # the parameter classes the value depends on (module docstring); the method for the
+    # inertial ones when there is no `p_jacobian` body
+    depends: Param = EVERY
+    inertia: str = "polynomial"
     # the Jacobian by q is along the velocity directions (nv columns), as gagen's
     # derivative kernels give it; False: the body fills q's nq columns itself
     tangent: bool = True
@@ -71,6 +111,15 @@ class Entry:
     # C does not declare is left out of its library
     requires: tuple[str, ...] = ()
     doc: str = ""
+
+    def __post_init__(self):
+        if self.inertia not in INERTIA_METHODS:
+            raise ValueError(f"{self.name}: inertia '{self.inertia}' is none of "
+                             f"{INERTIA_METHODS}")
+        if (self.inertia == "p_jacobian") != (self.p_jacobian is not None):
+            raise ValueError(f"{self.name}: inertia='p_jacobian' goes with a p_jacobian body")
+        if self.depends & ~EVERY:  # nothing here depends on Param.SIMULATION
+            raise ValueError(f"{self.name}: depends has unknown classes")
 
     def work_size(self, sizes: dict[str, int], with_p: bool) -> int:
         total = int(self.work(sizes)) if self.work is not None else 0
@@ -108,6 +157,7 @@ FORWARD_DYNAMICS = Entry(
     gc_matmul(NV, NV, NP, D_qdd_tau, dtau, -1.0, D_qdd_p);
     return 0;""",
     p_work=lambda s: s["nv"] + s["nv"] * s["np"] + s["regressor_dp"],
+    inertia="p_jacobian",
     requires=("forward_dynamics", "forward_dynamics_derivatives", "regressor",
               "regressor_parameters"),
     doc="qdd = forward_dynamics(q, qd, tau): the Jacobian from forward_dynamics_derivatives",
@@ -124,6 +174,7 @@ INVERSE_DYNAMICS = Entry(
     return 0;""",
     p_jacobian="return gc_regressor_dp(q, qd, qdd, p, D_tau_p, ws);",
     p_work=lambda s: s["regressor_dp"],
+    inertia="p_jacobian",
     requires=("inverse_dynamics", "inverse_dynamics_derivatives", "mass_matrix",
               "regressor", "regressor_parameters"),
     doc="tau = inverse_dynamics(q, qd, qdd): the Jacobian from "
@@ -156,7 +207,14 @@ MASS_MATRIX = Entry(
     }}
     return 0;""",
     work=lambda s: 3 * s["nv"] ** 2 + s["nv"],
-    requires=("mass_matrix", "inverse_dynamics_derivatives"),
+    # column j of M is (Y(q, 0, e_j) - Y(q, 0, 0)) pi: dM/dp through the regressor (nv + 1
+    # regressors, cheaper than the five-point stencil's 4 M per parameter on ANYmal C)
+    p_jacobian="return gc_mass_matrix_dp(q, p, D_M_p, ws);",
+    p_work=lambda s: s["mass_matrix_dp"],
+    inertia="p_jacobian",
+    depends=Param.KINEMATIC | Param.BODY | Param.ARMATURE,
+    requires=("mass_matrix", "inverse_dynamics_derivatives", "regressor",
+              "regressor_parameters"),
     doc="M = mass_matrix(q): the Jacobian from inverse_dynamics_derivatives at qd = 0, "
         "qdd = e_j",
 )
@@ -174,6 +232,9 @@ GRAVITY = Entry(
     p_jacobian="return gc_regressor_dp(q, gc_zeros, gc_zeros, p, D_g_p, ws);",
     work=lambda s: s["nv"] ** 2,
     p_work=lambda s: s["regressor_dp"],
+    inertia="p_jacobian",
+    # damping and friction vanish at qd = 0, armature at qdd = 0
+    depends=Param.KINEMATIC | Param.GRAVITY | Param.BODY,
     requires=("gravity", "inverse_dynamics_derivatives", "regressor",
               "regressor_parameters"),
     doc="g = gravity(q) = inverse_dynamics(q, 0, 0): the Jacobian from "
@@ -189,6 +250,8 @@ CORIOLIS_MATRIX = Entry(
     # in forward mode by spatial algebra: each coordinate moves its subtree rigidly; by qd
     # it is C(q, e_k), C being linear in qd)
     jacobian="return {ident}_coriolis_matrix_derivatives(q, qd, p, NULL, D_C_q, D_C_qd);",
+    # linear in the bodies' pi (Christoffel symbols of M); armature is constant in M
+    depends=Param.KINEMATIC | Param.BODY,
     requires=("coriolis_matrix", "coriolis_matrix_derivatives"),
     doc="C = coriolis_matrix(q, qd): the Jacobian from coriolis_matrix_derivatives",
 )
@@ -221,6 +284,7 @@ FRAME_PLACEMENT = Entry(
     return 0;""",
     work=lambda s: 6 * s["nv"],
     per_frame=True,
+    depends=Param.KINEMATIC,
     requires=("frame_placement", "frame_jacobian"),
     doc="(R, pos) = frame_placement(q, frame): the Jacobian from the frame Jacobian",
 )
@@ -236,6 +300,7 @@ FRAME_JACOBIAN = Entry(
     gc_jacobian_derivative(frame, J, D_J_q);
     return 0;""",
     per_frame=True,
+    depends=Param.KINEMATIC,
     requires=("frame_jacobian",),
     doc="J = frame_jacobian(q, frame) (LOCAL_WORLD_ALIGNED): dJ/dq from J's own columns "
         "(each joint's twist moves the columns above it rigidly and the frame's point for "
@@ -263,6 +328,7 @@ FRAME_VELOCITY = Entry(
     return 0;""",
     work=lambda s: 6 * s["nv"] ** 2,
     per_frame=True,
+    depends=Param.KINEMATIC,
     requires=("frame_velocity", "frame_jacobian"),
     doc="v = frame_velocity(q, qd, frame) = J qd: dv/dqd = J, dv/dq = (dJ/dq) qd",
 )
@@ -271,6 +337,9 @@ FRAME_VELOCITY = Entry(
 # Their Jacobians by q are the model's analytic centroidal derivative kernels
 # (model/centroidal_derivatives.c.j2: the motion subspaces' spatial algebra), along the
 # velocity directions; by qd the maps themselves, or the kernels where a map depends on qd.
+# By the bodies' inertial parameters each is P / D with D the moving bodies' total mass and
+# P a polynomial in pi (the centre of mass is the mass-weighted mean of the bodies'; the
+# centroidal maps take moments about it): the quotient rule on the exact stencil of D X.
 
 CENTER_OF_MASS = Entry(
     name="center_of_mass",
@@ -278,6 +347,8 @@ CENTER_OF_MASS = Entry(
     outputs=(Port("com", 3),),
     value="{ident}_center_of_mass(q, p, com);\n    return 0;",
     jacobian="{ident}_com_jacobian(q, p, D_com_q);\n    return 0;",
+    depends=Param.KINEMATIC | Param.BODY,
+    inertia="quotient",
     requires=("center_of_mass", "com_jacobian"),
     doc="com = center_of_mass(q): the Jacobian is com_jacobian",
 )
@@ -291,6 +362,8 @@ COM_VELOCITY = Entry(
     {ident}_com_jacobian(q, p, D_vcom_qd);
     {ident}_com_velocity_derivatives(q, qd, p, D_vcom_q);
     return 0;""",
+    depends=Param.KINEMATIC | Param.BODY,
+    inertia="quotient",
     requires=("com_velocity", "com_jacobian", "com_velocity_derivatives"),
     doc="vcom = com_velocity(q, qd) = J_com qd: by qd J_com, by q com_velocity_derivatives",
 )
@@ -301,6 +374,8 @@ COM_JACOBIAN = Entry(
     outputs=(Port("J", 3, "nv"),),
     value="{ident}_com_jacobian(q, p, J);\n    return 0;",
     jacobian="{ident}_com_jacobian_derivatives(q, p, D_J_q);\n    return 0;",
+    depends=Param.KINEMATIC | Param.BODY,
+    inertia="quotient",
     requires=("com_jacobian", "com_jacobian_derivatives"),
     doc="J = com_jacobian(q): the Jacobian from com_jacobian_derivatives",
 )
@@ -311,6 +386,8 @@ CENTROIDAL_MAP = Entry(
     outputs=(Port("Ag", 6, "nv"),),
     value="{ident}_centroidal_map(q, p, Ag);\n    return 0;",
     jacobian="{ident}_centroidal_map_derivatives(q, p, D_Ag_q);\n    return 0;",
+    depends=Param.KINEMATIC | Param.BODY,
+    inertia="quotient",
     requires=("centroidal_map", "centroidal_map_derivatives"),
     doc="Ag = centroidal_map(q): the Jacobian from centroidal_map_derivatives",
 )
@@ -324,6 +401,8 @@ CENTROIDAL_MOMENTUM = Entry(
     {ident}_centroidal_map(q, p, D_hg_qd);
     {ident}_centroidal_momentum_derivatives(q, qd, p, D_hg_q);
     return 0;""",
+    depends=Param.KINEMATIC | Param.BODY,
+    inertia="quotient",
     requires=("centroidal_momentum", "centroidal_map", "centroidal_momentum_derivatives"),
     doc="hg = centroidal_momentum(q, qd) = Ag qd: by qd Ag, by q "
         "centroidal_momentum_derivatives",
@@ -336,6 +415,8 @@ CENTROIDAL_MAP_TIME_VARIATION = Entry(
     value="{ident}_centroidal_map_time_variation(q, qd, p, dAg);\n    return 0;",
     jacobian="{ident}_centroidal_map_time_variation_derivatives(q, qd, p, D_dAg_q, "
              "D_dAg_qd);\n    return 0;",
+    depends=Param.KINEMATIC | Param.BODY,
+    inertia="quotient",
     requires=("centroidal_map_time_variation", "centroidal_map_time_variation_derivatives"),
     doc="dAg = centroidal_map_time_variation(q, qd): the Jacobian from "
         "centroidal_map_time_variation_derivatives (by qd: dAg/dq)",
@@ -347,6 +428,8 @@ CENTROIDAL_BIAS = Entry(
     outputs=(Port("b", 6),),
     value="{ident}_centroidal_bias(q, qd, p, b);\n    return 0;",
     jacobian="{ident}_centroidal_bias_derivatives(q, qd, p, D_b_q, D_b_qd);\n    return 0;",
+    depends=Param.KINEMATIC | Param.BODY,
+    inertia="quotient",
     requires=("centroidal_bias", "centroidal_bias_derivatives"),
     doc="b = centroidal_bias(q, qd) = dAg qd: the Jacobian from centroidal_bias_derivatives",
 )
@@ -366,6 +449,7 @@ FRAME_ACCELERATION = Entry(
     if (rc) return rc;
     return {ident}_frame_acceleration_derivatives(q, qd, qdd, p, frame, D_a_q, D_a_qd);""",
     per_frame=True,
+    depends=Param.KINEMATIC,
     requires=("frame_acceleration", "frame_jacobian", "frame_acceleration_derivatives"),
     doc="a = frame_acceleration(q, qd, qdd, frame) (classical, LOCAL_WORLD_ALIGNED): by qdd "
         "the frame Jacobian, by q and qd frame_acceleration_derivatives",
@@ -380,6 +464,7 @@ FRAME_BIAS_ACCELERATION = Entry(
     jacobian="return {ident}_frame_acceleration_derivatives(q, qd, NULL, p, frame, D_a_q, "
              "D_a_qd);",
     per_frame=True,
+    depends=Param.KINEMATIC,
     requires=("frame_bias_acceleration", "frame_acceleration_derivatives"),
     doc="a = frame_bias_acceleration(q, qd, frame) = dJ/dt qd (classical, "
         "LOCAL_WORLD_ALIGNED): frame_acceleration_derivatives at qdd = 0",
@@ -394,6 +479,7 @@ FRAME_JACOBIAN_TIME_VARIATION = Entry(
     jacobian="return {ident}_frame_jacobian_time_variation_derivatives(q, qd, p, frame, "
              "D_dJ_q, D_dJ_qd);",
     per_frame=True,
+    depends=Param.KINEMATIC,
     requires=("frame_jacobian_time_variation",
               "frame_jacobian_time_variation_derivatives"),
     doc="dJ = frame_jacobian_time_variation(q, qd, frame) (LOCAL_WORLD_ALIGNED): "
@@ -411,8 +497,15 @@ DELASSUS = Entry(
     return {ident}_delassus(q, p, 1, &frame, 6, work, G);""",
     # dG = dJ Y + Y^T dJ^T - Y^T dM Y with Y = M^-1 J^T, in the model's C
     jacobian="return {ident}_delassus_derivatives(q, p, frame, NULL, D_G_q);",
+    # by the inertial parameters dG = -Y^T dM Y (J does not depend on them), dM as
+    # mass_matrix's
+    p_jacobian="return gc_delassus_dp(q, p, frame, D_G_p, ws);",
+    p_work=lambda s: s["delassus_dp"],
+    inertia="p_jacobian",
     per_frame=True,
-    requires=("delassus", "delassus_derivatives"),
+    depends=Param.KINEMATIC | Param.BODY | Param.ARMATURE,
+    requires=("delassus", "delassus_derivatives", "mass_matrix", "frame_jacobian",
+              "regressor", "regressor_parameters"),
     doc="G = delassus(q, frame) = J M^-1 J^T of the frame's LOCAL_WORLD_ALIGNED Jacobian "
         "(M factorised, never inverted): dG from delassus_derivatives",
 )
