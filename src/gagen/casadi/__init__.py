@@ -28,12 +28,16 @@ Which derivatives are analytic (gagen.casadi.table has the details):
   centroidal_map_time_variation, centroidal_bias: by q and qd from the model's centroidal
   C (com_jacobian, centroidal_map and the analytic *_derivatives kernels of
   model/centroidal_derivatives.c.j2);
-- by the parameters p (the `_p` functions, `parameters=True`): for inverse_dynamics,
-  forward_dynamics and gravity, the inertial parameters (masses, centres of mass,
-  inertias, joint damping, friction, armature: those the regressor Y does not depend on)
-  through the regressor, dtau/dp = Y dpi/dp (and -M^-1 dtau/dp for forward dynamics); the
-  kinematic parameters (lengths, gravity) and every parameter of the other functions by
-  central differences of the compiled function.
+- by the parameters p (the `_p` functions, `parameters=True`): column by column from the
+  parameter's class (gagen.casadi.build.parameter_classes) and what the function depends
+  on (gagen.casadi.table): zeros by structure without an evaluation; gravity g by one
+  evaluation (every value is affine in it); the inertial parameters (masses, centres of
+  mass, inertias, damping, friction, armature) through the regressor (dtau/dp = Y dpi/dp,
+  -M^-1 dtau/dp, dM/dp = (Y(q, 0, e_j) - Y(q, 0, 0)) dpi/dp, the Delassus matrix's
+  -Y^T dM Y) or by the five-point stencil, exact on polynomials of degree <= 4 (C; D X for
+  the centroidal functions, D the total mass, and the quotient rule); a model file's
+  lengths and angles by the five-point stencil with a small step (exact for polynomials
+  of degree <= 4 in them, O(h^4) otherwise).
 
 By q, a floating joint's quaternion columns are the derivative along its velocity
 directions mapped back onto q's entries, orthogonal to the quaternion (the kernels

@@ -215,8 +215,9 @@ def _work_sizes(entry: Entry, ins, outs, sizes, with_p: bool) -> dict[str, int]:
     widths = [nv if k == 0 and entry.tangent and entry.jacobian else n
               for k, (_, n) in enumerate(ins)]
     blocks = sum(m * (sum(widths) + (np_ if with_p else 0)) for m in numel)
-    regressor_dp = nv * nreg + nreg * np_ + np_ + nreg
-    mass_matrix_dp = 2 * nv * nreg + nreg * np_ + np_ + nreg + nv + nv * np_
+    # gc_dpi's list of dpi/dp's non-zeros (3 NREG NP) and its own work (NP + 4 NREG)
+    regressor_dp = nv * nreg + 3 * nreg * np_ + np_ + 4 * nreg
+    mass_matrix_dp = 2 * nv * nreg + 3 * nreg * np_ + np_ + 4 * nreg + nv
     body = entry.work_size({**sizes, "central": central, "regressor_dp": regressor_dp,
                             "mass_matrix_dp": mass_matrix_dp,
                             "delassus_dp": nv * nv * (np_ + 1) + 18 * nv + mass_matrix_dp},
