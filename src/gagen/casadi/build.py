@@ -11,6 +11,7 @@ Python and C use the same compiled code.
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import re
 import shutil
@@ -115,7 +116,7 @@ def parameter_classes(dyn, states: int = 3) -> list[int]:
         elif columns.any():
             classes.append(Param.GRAVITY if _affine(dyn, q, qd, qdd, p0, k)
                            else Param.KINEMATIC)
-        elif moved.any() and _polynomial(dyn, p0, k):
+        elif moved.any() and _pi_degree(dyn, p0, k):
             classes.append(int(np.bitwise_or.reduce(kinds[moved])))
         elif not moved.any() and names[k] == FRICTION_WIDTH:
             classes.append(Param.SIMULATION)
@@ -133,14 +134,44 @@ def _affine(dyn, q, qd, qdd, p0, k) -> bool:
     return float(np.abs(Y[0] - 2 * Y[1] + Y[2]).max(initial=0.0)) <= 1e-11 * max(scale, 1e-300)
 
 
-def _polynomial(dyn, p0, k) -> bool:
-    """Whether pi is a polynomial of degree 4 or less in parameter k: its fifth difference,
-    at the wrapper's stencil's step (0.25 max(|p_k|, 1)), vanishes to rounding."""
+def pi_degrees(dyn, classes: list[int]) -> list[int]:
+    """Per parameter of an inertial class, the degree of pi in it (1, 2 or 4: at most), 0
+    for the others: which stencil is exact for it (a central difference for degree <= 2,
+    the five-point stencil for <= 4; a value quadratic in pi, such as the total mass times
+    a centroidal quantity, has twice pi's degree)."""
+    from .table import INERTIAL
+
+    p0 = dyn.parameter_vector()
+    return [_pi_degree(dyn, p0, k) if c and not c & ~int(INERTIAL) else 0
+            for k, c in enumerate(classes)]
+
+
+def mass_parameters(dyn) -> list[bool]:
+    """Per parameter, whether the moving bodies' total mass D changes with it (to the bit):
+    the centroidal values' columns by the others need no quotient rule (X = P / D with D
+    fixed is a polynomial itself)."""
+    masses = [10 * b for b in range(len(dyn.info.moving_bodies))]
+    p0 = dyn.parameter_vector()
+    total = dyn.regressor_parameters(p0)[masses].sum()
+    return [bool(dyn.regressor_parameters(_stepped(p0, k, 0.5 * p0[k] + 0.25))[masses].sum()
+                 != total) for k in range(len(p0))]
+
+
+def _pi_degree(dyn, p0, k) -> int:
+    """The least of 1, 2, 4 that pi's degree in parameter k does not exceed (its next
+    difference, at the wrapper's stencil's step 0.25 max(|p_k|, 1), vanishes to rounding),
+    or 0 if none does."""
     h = 0.25 * max(abs(p0[k]), 1.0)
-    pis = [dyn.regressor_parameters(_stepped(p0, k, s * h)) for s in range(-3, 3)]
-    fifth = sum(c * pi for c, pi in zip((-1, 5, -10, 10, -5, 1), pis))
-    scale = max(float(np.abs(pi).max(initial=0.0)) for pi in pis)
-    return float(np.abs(fifth).max(initial=0.0)) <= 1e-10 * max(scale, 1e-300)
+    pis = {s: dyn.regressor_parameters(_stepped(p0, k, s * h)) for s in range(-3, 3)}
+    scale = max(max(float(np.abs(pi).max(initial=0.0)) for pi in pis.values()), 1e-300)
+    # the (degree + 1)-th difference over the points first .. first + degree + 1
+    for degree, first in ((1, -1), (2, -1), (4, -3)):
+        order = degree + 1
+        difference = sum(math.comb(order, j) * (-1) ** (order - j) * pis[first + j]
+                         for j in range(order + 1))
+        if float(np.abs(difference).max(initial=0.0)) <= 1e-10 * scale:
+            return degree
+    return 0
 
 
 def _stepped(p0, k, step):
@@ -162,8 +193,10 @@ def write_sources(dyn, folder: Path) -> list[str]:
     _collect(Path(deriv.__file__).parent, deriv.KEY, files)
     headers = [files[name].decode() for name in (f"{ident}.h", f"{ident}_derivatives.h")
                if name in files]
-    generated = generate_casadi(dyn.info, ident, len(dyn.regressor_names),
-                                parameter_classes(dyn),
+    classes = parameter_classes(dyn)
+    generated = generate_casadi(dyn.info, ident, len(dyn.regressor_names), classes,
+                                degrees=pi_degrees(dyn, classes),
+                                masses=mass_parameters(dyn),
                                 kernels=declared_kernels(ident, headers))
     for name, text in generated.items():
         files[name] = text.encode()

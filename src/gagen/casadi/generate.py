@@ -144,13 +144,19 @@ def declared_kernels(ident: str, headers: list[str]) -> set[str]:
 
 def generate_casadi(info: ModelInfo, ident: str, nreg: int, classes: list[int],
                     entries: tuple[Entry, ...] = ENTRIES,
-                    kernels: set[str] | None = None) -> dict[str, str]:
+                    kernels: set[str] | None = None,
+                    degrees: list[int] | None = None,
+                    masses: list[bool] | None = None) -> dict[str, str]:
     """The wrapper's C file and header, {file name: text}, for a model with manifest `info`
     whose kernels are named `<ident>_...` and whose regressor has `nreg` columns;
     `classes[k]`: parameter k's class (gagen.casadi.table's flags, from
     gagen.casadi.build.parameter_classes), which picks how its Jacobian columns are
-    computed. With `kernels` (`declared_kernels`), the entries that need a kernel the
-    model's C lacks are left out."""
+    computed; `degrees[k]`: pi's degree in an inertial parameter (1, 2 or 4, from
+    gagen.casadi.build.pi_degrees; default 4), which picks the stencil that is exact for it;
+    `masses[k]`: whether the total mass depends on parameter k (default: every parameter),
+    where the centroidal values need the quotient rule.
+    With `kernels` (`declared_kernels`), the entries that need a kernel the model's C lacks
+    are left out."""
     prefix = prefix_of(ident)
     if kernels is not None:
         entries = tuple(e for e in entries if set(e.requires) <= kernels)
@@ -160,6 +166,12 @@ def generate_casadi(info: ModelInfo, ident: str, nreg: int, classes: list[int],
         raise ValueError(f"classes has {len(classes)} entries for {np_} parameters")
     if any(c not in _CLASSES for c in classes):
         raise ValueError("a parameter's class is not one of gagen.casadi.table's")
+    degrees = [4] * np_ if degrees is None else [int(d) for d in degrees]
+    if len(degrees) != np_ or any(d not in (0, 1, 2, 4) for d in degrees):
+        raise ValueError("degrees must hold 0, 1, 2 or 4 per parameter")
+    masses = [True] * np_ if masses is None else [bool(m) for m in masses]
+    if len(masses) != np_:
+        raise ValueError(f"masses has {len(masses)} entries for {np_} parameters")
     nframes = len(info.frames)
     sizes = {"nq": nq, "nv": nv, "np": np_, "nreg": nreg}
     patterns = _Patterns()
@@ -186,6 +198,8 @@ def generate_casadi(info: ModelInfo, ident: str, nreg: int, classes: list[int],
         "zeros": max(nq, nv, np_, 1),
         "defaults": [_c_number(v) for v in defaults],
         "classes": [int(c) for c in classes] or [0],
+        "degrees": degrees or [0],
+        "masses": [1 if m else 0 for m in masses] or [0],
         "nbodies": len(info.moving_bodies),
         "plain": plain_coordinates(info),
         "floating": info.floating_joints(),
