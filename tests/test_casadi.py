@@ -338,8 +338,9 @@ def test_casadi_jacobians_match_central_differences(model):
 
 def test_parameter_jacobians_match_central_differences(model):
     """The `_p` functions: values at other parameters (heavier bodies, weaker gravity), and
-    the Jacobian by p (the regressor's for the inertial parameters, central differences for
-    the rest) against central differences of gagen's functions in p; forward dynamics' as
+    the Jacobian by p (gagen.casadi.table's methods per parameter class; the exact checks
+    are tests/test_casadi_params.py's) against central differences of gagen's functions in
+    p; forward dynamics' as
     -M^-1 dtau/dp with dtau/dp so differenced (its own differences are ill-conditioned)."""
     dyn, _, fns, frames = model
     names = list(dyn.parameters)

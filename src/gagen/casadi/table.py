@@ -33,9 +33,10 @@ Conventions of the C bodies (see templates/casadi.c.j2):
     less): the entry's `p_jacobian` body where it has one (dtau/dp = Y dpi/dp through the
     regressor, -M^-1 dtau/dp, dM/dp = (Y(q, 0, e_j) - Y(q, 0, 0)) dpi/dp, the Delassus
     matrix's -Y^T dM Y); else `inertia` says how: "polynomial" (a value linear in pi, hence
-    of degree <= 4 in each parameter: the five-point stencil is exact whatever its step),
-    or "quotient" (a centroidal value X = P / D, D the total mass, P polynomial: the
-    stencil of D X, and dX = (d(D X) - X dD) / D);
+    of pi's degree in each parameter: the stencil exact for that degree, a central
+    difference for <= 2, the five-point one for <= 4, whatever its step), or "quotient" (a
+    centroidal value X = P / D, D the total mass, P quadratic in pi: the stencil of D X,
+    and dX = (d(D X) - X dD) / D; by a parameter D does not depend on, X's own stencil);
   * kinematic (lengths, angles of a model file's joints; anything else): the five-point
     stencil with a small step: exact for values of degree <= 4 in the parameter (a length
     enters translations linearly and inertias as m L^2), O(h^4) otherwise.
