@@ -231,7 +231,7 @@ def _work_sizes(entry: Entry, ins, outs, sizes, with_p: bool) -> dict[str, int]:
     blocks = sum(m * (sum(widths) + (np_ if with_p else 0)) for m in numel)
     # gc_dpi's list of dpi/dp's non-zeros (3 NREG NP) and its own work (NP + 4 NREG)
     regressor_dp = nv * nreg + 3 * nreg * np_ + np_ + 4 * nreg
-    mass_matrix_dp = 2 * nv * nreg + 3 * nreg * np_ + np_ + 4 * nreg + nv
+    mass_matrix_dp = 3 * nv * nreg + 3 * nreg * np_ + np_ + 4 * nreg + nv + nv * np_
     body = entry.work_size({**sizes, "central": central, "regressor_dp": regressor_dp,
                             "mass_matrix_dp": mass_matrix_dp,
                             "delassus_dp": nv * nv * (np_ + 1) + 18 * nv + mass_matrix_dp},
