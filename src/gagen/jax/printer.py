@@ -146,12 +146,13 @@ class _Writer:
             for k in used:
                 lines.append(f"{array}{k} = {array}[..., {k}]")
                 defined.add(f"{array}{k}")
-        for k in self.printer.trig_used(exprs):
-            if f"sn{k}" in defined:
-                continue
-            lines.append(f"sn{k} = jnp.sin(q{k})")
-            lines.append(f"cs{k} = jnp.cos(q{k})")
-            defined |= {f"sn{k}", f"cs{k}"}
+        # the sines and cosines of all the angles together, in one loop and one array each
+        # (gagen.jax.trig: XLA's own are calls per element, copied into every reader)
+        angles = [k for k in self.printer.trig_used(exprs) if f"sn{k}" not in defined]
+        if angles:
+            lines.append(f"{', '.join(f'sn{k}, cs{k}' for k in angles)}, = "
+                         f"_sincos(({', '.join(f'q{k}' for k in angles)},))")
+            defined |= {f"{kind}{k}" for k in angles for kind in ("sn", "cs")}
         # how many expressions of this body read each name: a value whose duplication into
         # its readers would cost more than DUPLICATED operations is divided by `unit` (1.0,
         # a value XLA cannot fold, from the first input), which makes it a producer XLA's
@@ -196,6 +197,7 @@ def _header(kind: str, ident: str) -> list[str]:
             "import jax.numpy as jnp",
             "",
             "from gagen.jax.linalg import stack as _stack",
+            "from gagen.jax.trig import sincos_stacked as _sincos",
             "from gagen.jax import linalg as _linalg",
             "",
             *(f"{name} = {value}" for name, value in FUNCTIONS.items()),
@@ -246,7 +248,7 @@ def print_main(eqs) -> str:
         # (gagen.jax.linalg)
         if tree is not None:
             w.lines += [f"PARENTS = {tuple(tree)!r}", ""]
-        solve = ("_linalg.solve_tree(M, F, PARENTS)" if tree is not None
+        solve = ("_linalg.solve_tree(M, F, PARENTS, 1.0 + 0.0 * q[..., 0])" if tree is not None
                  else "_linalg.solve_lower(M, F, PLAN)")
         w.function("_mass_forcing", ("q", "qd", "tau", "p"),
                    {"M": out["mass_matrix"], "F": out["forcing"]},
