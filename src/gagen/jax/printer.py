@@ -103,6 +103,15 @@ class _Writer:
         # each printed name's cost where XLA inlines it: its operations and those of the
         # names it reads that are inlined too (0 for a value kept in an array of its own)
         self.inlined: dict[str, int] = {}
+        # the names that are functions of the parameters alone
+        self.fixed: set[str] = {f"p{k}" for k in range(len(eqs.parameters))}
+        self.angles = set(eqs.coords.q)
+
+    def trig_count(self, expr: sp.Expr) -> int:
+        """How many sines and cosines of coordinates `expr` holds (count_ops counts each)."""
+        angles = self.angles
+        return sum(1 for node in sp.preorder_traversal(expr)
+                   if isinstance(node, (sp.sin, sp.cos)) and node.args[0] in angles)
 
     def text(self, expr: sp.Expr) -> str:
         return self.printer.doprint(expr)
@@ -174,8 +183,17 @@ class _Writer:
             if a.symbol not in self.texts:
                 self.texts[a.symbol] = self.text(a.expr)
             text = _checked(self.texts[a.symbol], defined)
-            cost = int(sp.count_ops(a.expr)) + sum(
-                self.inlined.get(r, 0) for r in self.printer.reads(a.expr))
+            reads = self.printer.reads(a.expr)
+            if all(r in self.fixed for r in reads):
+                # a function of the parameters alone: a number where p is (the defaults), a
+                # value per batch where p is not batched; never an array of its own
+                self.fixed.add(name)
+                lines.append(f"{name} = {text}")
+                defined.add(name)
+                continue
+            # the angles' sines and cosines are arrays already (one read, no operation)
+            cost = int(sp.count_ops(a.expr)) - self.trig_count(a.expr) + sum(
+                self.inlined.get(r, 0) for r in reads)
             if (readers.get(name, 0) - 1) * cost > DUPLICATED:
                 text = f"({text}) / unit"
                 cost = 0

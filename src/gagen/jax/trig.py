@@ -4,8 +4,11 @@
 XLA's float64 sin and cos on the CPU are calls per element (about 10 ns a sin+cos pair:
 ANYmal C's 12 angles were about a tenth of its printed forward dynamics), and XLA's fusion
 copies them, like any elementwise producer, into each loop that reads them (the printed
-Panda arm's 7 angles were 16 sines). `sincos_stacked` computes every angle of a program at
-once, in one loop, and keeps the results in one array each that every reader reads.
+Panda arm's 7 angles were 16 sines). `sincos_stacked` computes every angle of a program
+under one check, behind lax.cond, which XLA does not fuse through: each sine and cosine is
+computed once, into an array of its own that its readers read (one array per angle, not
+one (batch, angles) array: its readers would read a column each, strided, which cost the
+printed ANYmal C a third of the gain).
 
 Method (gagen_math.h, fdlibm / FreeBSD msun): n = rint(x 2/π) and x − n π/2 = y0 + y1 by
 Cody-Waite reduction with π/2 in 33-bit parts (every product n·part is exact as
@@ -112,45 +115,56 @@ def _beyond(x):
     return jnp.where(far, jnp.sin(x), s), jnp.where(far, jnp.cos(x), c)
 
 
-def _checked(x):
-    # max is NaN where any x is: that batch takes the exact branch
-    return lax.cond(jnp.max(jnp.abs(x)) < BOUND, sincos_fast, _beyond, x)
+def _all(method, xs):
+    return tuple(v for x in xs for v in method(x))
+
+
+def _checked(xs):
+    # (sin, cos) of each x: sincos_fast unless some |x| is not below BOUND (NaN included:
+    # max is NaN then), which sends the whole batch to _beyond
+    largest = jnp.max(jnp.stack([jnp.max(jnp.abs(x)) for x in xs]))
+    return lax.cond(largest < BOUND, lambda xs: _all(sincos_fast, xs),
+                    lambda xs: _all(_beyond, xs), xs)
 
 
 @jax.custom_batching.custom_vmap
-def _sincos_batch(x):
-    return _checked(x)
+def _sincos_batch(xs):
+    return _checked(xs)
 
 
 @_sincos_batch.def_vmap
-def _sincos_batch_rule(axis_size, in_batched, x):
-    # elementwise: the batched x is just a bigger array, checked as a whole
-    return _checked(x), (in_batched[0], in_batched[0])
+def _sincos_batch_rule(axis_size, in_batched, xs):
+    # elementwise: the batched arrays are just bigger ones, checked as a whole
+    return _checked(xs), tuple(b for b in in_batched[0] for _ in range(2))
 
 
 @jax.custom_jvp
+def _sincos(xs):
+    return _sincos_batch(xs)
+
+
+@_sincos.defjvp
+def _sincos_jvp(primals, tangents):
+    (xs,), (dxs,) = primals, tangents
+    out = _sincos(xs)
+    dout = []
+    for i, dx in enumerate(dxs):
+        s, c = out[2 * i], out[2 * i + 1]
+        dout += [c * dx, -s * dx]
+    return out, tuple(dout)
+
+
 def sincos(x):
     """(sin x, cos x) of a float64 array: sincos_fast where every |x| < BOUND, else
     jnp.sin and jnp.cos beyond it; derivatives (cos x, −sin x)."""
-    return _sincos_batch(x)
-
-
-@sincos.defjvp
-def _sincos_jvp(primals, tangents):
-    (x,), (dx,) = primals, tangents
-    s, c = sincos(x)
-    return (s, c), (c * dx, -s * dx)
+    return _sincos((jnp.asarray(x),))
 
 
 def sincos_stacked(angles):
-    """(sin a0, cos a0, sin a1, cos a1, …) of the angles (arrays of one shape), computed
-    together: one array of sines and one of cosines, which their readers slice."""
-    x = jnp.stack([jnp.asarray(a) for a in angles], axis=-1)
-    if x.dtype != jnp.float64:
-        s, c = jnp.sin(x), jnp.cos(x)  # the fast path's constants are float64's
-    else:
-        s, c = sincos(x)
-    out = []
-    for i in range(len(angles)):
-        out += [s[..., i], c[..., i]]
-    return tuple(out)
+    """(sin a0, cos a0, sin a1, cos a1, …) of the angles (float64 arrays), computed together
+    and checked together: an array of its own for each, which its readers read (XLA's
+    fusion would otherwise copy the polynomials into every reader)."""
+    xs = tuple(jnp.asarray(a) for a in angles)
+    if any(x.dtype != jnp.float64 for x in xs):
+        return _all(lambda x: (jnp.sin(x), jnp.cos(x)), xs)  # the constants are float64's
+    return _sincos(xs)
