@@ -123,7 +123,8 @@ def solve_tree(lower, F, parents, unit=1.0):
     divided by it, which keeps each in an array of its own (see gagen.jax.printer's
     DUPLICATED): left to XLA's fusion, the chains of updates behind them were copied into
     every reader (ANYmal C's printed forward dynamics: 10,492 operations per state in XLA's
-    loops, 8,870 with them kept, 1.2 against 1.1 µs per state). x / 1.0 is x exactly."""
+    loops, 9,103 with them kept; 1.22 against 1.08 µs per state, medians of 31 interleaved
+    runs at 4,096 states; the Panda arm's 0.37 against 0.31). x / 1.0 is x exactly."""
     n = len(parents)
 
     def ancestors(k):
