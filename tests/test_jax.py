@@ -545,20 +545,147 @@ def test_a_cached_printed_module_loads_without_sympy(tmp_path):
     assert second["out"] == first["out"]
 
 
-def test_xla_duplicates_little_of_a_printed_program():
-    """XLA's CPU fusion inlines a cheap value into every reader; the printer keeps a value
-    whose duplication would cost more than a few operations in an array of its own (x / 1.0).
-    The compiled program's arithmetic is within 1.5x of the printed one's (every value
-    inlined: 1.74x on this program; twentyfold on the Panda's)."""
-    dyn, f = model("rrr"), functions("rrr", "jax")
-    q, qd, qdd = state(dyn, 3, rows=8)
-    lowered = jax.jit(f["inverse_dynamics_derivatives"]).lower(q, qd, qdd)
+def _arithmetic(fn, *args) -> tuple[int, int]:
+    """(operations XLA runs, operations printed) of jax.jit(fn) at args."""
+    lowered = jax.jit(fn).lower(*args)
     arithmetic = ("multiply", "add", "subtract", "negate", "divide", "sine", "cosine")
     printed = sum(len(re.findall(rf"stablehlo\.{op}\b", lowered.as_text())) for op in arithmetic)
     compiled = lowered.compile().as_text()
     ran = sum(len(re.findall(rf"= f64\[[\d,]*\]\S* {op}\(", compiled)) for op in arithmetic)
+    return ran, printed
+
+
+def test_xla_duplicates_little_of_a_printed_program():
+    """XLA's CPU fusion inlines a cheap value into every reader; the printer keeps a value
+    whose duplication would cost more than a few operations in an array of its own (x / 1.0).
+    The compiled program's arithmetic is within 1.5x of the printed one's (every value
+    inlined: 1.74x on this program; twentyfold on the Panda's). The angles' sines and
+    cosines (gagen.jax.trig: both branches of its check, the sine and cosine loops each
+    with their polynomials) are counted apart."""
+    from gagen.jax.trig import sincos_stacked
+
+    dyn, f = model("rrr"), functions("rrr", "jax")
+    q, qd, qdd = state(dyn, 3, rows=8)
+    ran, printed = _arithmetic(f["inverse_dynamics_derivatives"], q, qd, qdd)
+    trig_ran, trig_printed = _arithmetic(
+        lambda q: sincos_stacked(tuple(q[..., k] for k in range(dyn.nq))), q)
+    ran, printed = ran - trig_ran, printed - trig_printed
     assert printed > 100
     assert ran <= 1.5 * printed, (ran, printed)
+
+
+# --- the printed programs' sines and cosines (gagen.jax.trig) -------------------------------
+
+def _ulps(got, want):
+    """|got − want| in units of want's last place (0 where both are equal, NaN included)."""
+    got, want = np.asarray(got), np.asarray(want)
+    same = (got == want) | (np.isnan(got) & np.isnan(want))
+    return np.where(same, 0.0, np.abs(got - want) / np.spacing(np.abs(want)))
+
+
+def _trig_points():
+    rng = np.random.default_rng(29)
+    return np.concatenate([
+        rng.uniform(-4.0, 4.0, 300_000),  # joint angles
+        rng.uniform(-1e5, 1e5, 400_000),
+        np.exp(rng.uniform(np.log(1e-300), np.log(1e5), 100_000)) * rng.choice([-1, 1], 100_000),
+        # at and next to the multiples of π/2, where the reduction cancels (its 2nd, 3rd rounds)
+        np.round(rng.uniform(-6e4, 6e4, 100_000)) * (np.pi / 2),
+        np.nextafter(np.round(rng.uniform(-6e4, 6e4, 50_000)) * (np.pi / 2), np.inf),
+        np.nextafter(np.round(rng.uniform(-6e4, 6e4, 50_000)) * (np.pi / 2), -np.inf),
+        # every quadrant, both signs
+        np.arange(-40, 41)[:, None] * (np.pi / 2) + np.array([-0.7, -0.3, 0.0, 0.3, 0.7]),
+    ], axis=None)
+
+
+def test_sincos_is_within_one_ulp_of_numpy_below_its_bound():
+    """A million points below 2^20 (joint angles, |x| < 1e5, tiny ones, the multiples of π/2
+    and their neighbours, every quadrant): the fast path within 1 ulp of NumPy's sin and cos
+    (both within about half an ulp of the exact value: at most 1 apart)."""
+    from gagen.jax import trig
+
+    x = _trig_points()
+    assert len(x) >= 1_000_000 and np.max(np.abs(x)) < trig.BOUND
+    s, c = jax.jit(trig.sincos)(jnp.asarray(x))
+    assert np.max(_ulps(s, np.sin(x))) <= 1.0
+    assert np.max(_ulps(c, np.cos(x))) <= 1.0
+    fs, fc = jax.jit(trig.sincos_fast)(jnp.asarray(x))  # the same numbers as the checked call
+    np.testing.assert_array_equal(fs, s)
+    np.testing.assert_array_equal(fc, c)
+
+
+def test_sincos_quadrants_and_signs():
+    """The quadrant chosen right: sin and cos of k π/2 + y against NumPy for k = -40 … 40,
+    including k π/2 itself (0 or ±1 up to the reduction's rounding); sin(±0) = ±0."""
+    from gagen.jax import trig
+
+    k = np.arange(-40, 41)
+    for y in (0.0, 0.25, -0.25, 0.75, -0.75):
+        x = k * (np.pi / 2) + y
+        s, c = trig.sincos(jnp.asarray(x))
+        if y:
+            assert np.max(_ulps(s, np.sin(x))) <= 1.0 and np.max(_ulps(c, np.cos(x))) <= 1.0
+        else:  # sin(k π/2) and cos(k π/2) of the double nearest k π/2: 0 up to ~1e-16 k, ±1
+            assert np.max(np.abs(s - np.sin(x))) <= 1e-16 * np.max(np.abs(x))
+            assert np.max(np.abs(c - np.cos(x))) <= 1e-16 * np.max(np.abs(x))
+    s, c = trig.sincos(jnp.asarray([0.0, -0.0]))
+    assert list(np.signbit(s)) == [False, True] and list(np.asarray(c)) == [1.0, 1.0]
+
+
+def test_sincos_hardest_reductions_are_within_one_ulp_of_the_exact_value():
+    """The doubles nearest the multiples of π/2 and the hardest ones to reduce in each binade
+    below 2^20 (those of tests/test_fast_trig.py, which need the reduction's second and third
+    rounds): within 1 ulp of sin and cos computed by mpmath."""
+    mpmath = pytest.importorskip("mpmath")
+    from test_fast_trig import hardest_reductions, near_multiples_of_pi_2
+
+    from gagen.jax import trig
+
+    hardest = hardest_reductions()
+    x = np.concatenate([hardest, near_multiples_of_pi_2(300)])
+    s, c = jax.jit(trig.sincos)(jnp.asarray(x))
+    with mpmath.workprec(300):
+        exact_s = np.array([float(mpmath.sin(mpmath.mpf(v))) for v in x.tolist()])
+        exact_c = np.array([float(mpmath.cos(mpmath.mpf(v))) for v in x.tolist()])
+    assert np.max(_ulps(s, exact_s)) <= 1.0
+    assert np.max(_ulps(c, exact_c)) <= 1.0
+    # the hardest are correctly rounded (without the third round: 1 ulp off, sin's)
+    assert np.max(_ulps(s[:len(hardest)], exact_s[:len(hardest)])) == 0.0
+
+
+@pytest.mark.parametrize("vmapped", [False, True])
+@pytest.mark.parametrize("special", [2.0 ** 20, -3e6, 1e22, -1e300, np.inf, -np.inf, np.nan])
+def test_sincos_beyond_its_bound_is_jnp_sin(special, vmapped):
+    """A batch holding an angle not below 2^20, inf or NaN takes jnp.sin and jnp.cos for
+    those (NaN for inf and NaN, as jnp.sin), the fast path for the rest: under jax.vmap too
+    (the check is over the whole batch)."""
+    from gagen.jax import trig
+
+    big = np.array([special, 1.5 * special])
+    x = jnp.asarray(np.concatenate([big, [0.5, -2.0, 1e5]]))
+    f = jax.jit(jax.vmap(trig.sincos) if vmapped else trig.sincos)
+    s, c = f(x)
+    np.testing.assert_array_equal(s[:len(big)], jnp.sin(x[:len(big)]))
+    np.testing.assert_array_equal(c[:len(big)], jnp.cos(x[:len(big)]))
+    assert np.max(_ulps(s[len(big):], np.sin(x[len(big):]))) <= 1.0
+    assert np.max(_ulps(c[len(big):], np.cos(x[len(big):]))) <= 1.0
+
+
+def test_sincos_derivatives_and_batches():
+    """jax.grad, jacfwd and vmap of sincos_stacked: (cos, −sin) exactly, stacked results equal
+    one at a time, angles of different batches (one batched, one not) under vmap."""
+    from gagen.jax import trig
+
+    x = np.linspace(-7.0, 7.0, 29)
+    g = jax.jit(jax.vmap(jax.grad(lambda a: trig.sincos(a)[0])))(jnp.asarray(x))
+    np.testing.assert_array_equal(g, trig.sincos(jnp.asarray(x))[1])
+    jac = jax.jacfwd(lambda a: jnp.stack(trig.sincos_stacked((a[0], a[1]))))(jnp.asarray([0.3, 2.0]))
+    s, c = np.asarray(trig.sincos(jnp.asarray([0.3, 2.0])))
+    np.testing.assert_array_equal(jac, [[c[0], 0], [-s[0], 0], [0, c[1]], [0, -s[1]]])
+    out = jax.vmap(lambda a, b: jnp.stack(trig.sincos_stacked((a, b))), in_axes=(0, None))(
+        jnp.asarray(x), 2.0)
+    np.testing.assert_array_equal(out[:, 0], trig.sincos(jnp.asarray(x))[0])
+    np.testing.assert_array_equal(out[:, 3], np.broadcast_to(c[1], x.shape))
 
 
 def test_the_printed_module_holds_only_checked_names_and_numbers():

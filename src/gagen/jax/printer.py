@@ -103,6 +103,15 @@ class _Writer:
         # each printed name's cost where XLA inlines it: its operations and those of the
         # names it reads that are inlined too (0 for a value kept in an array of its own)
         self.inlined: dict[str, int] = {}
+        # the names that are functions of the parameters alone
+        self.fixed: set[str] = {f"p{k}" for k in range(len(eqs.parameters))}
+        self.angles = set(eqs.coords.q)
+
+    def trig_count(self, expr: sp.Expr) -> int:
+        """How many sines and cosines of coordinates `expr` holds (count_ops counts each)."""
+        angles = self.angles
+        return sum(1 for node in sp.preorder_traversal(expr)
+                   if isinstance(node, (sp.sin, sp.cos)) and node.args[0] in angles)
 
     def text(self, expr: sp.Expr) -> str:
         return self.printer.doprint(expr)
@@ -146,12 +155,13 @@ class _Writer:
             for k in used:
                 lines.append(f"{array}{k} = {array}[..., {k}]")
                 defined.add(f"{array}{k}")
-        for k in self.printer.trig_used(exprs):
-            if f"sn{k}" in defined:
-                continue
-            lines.append(f"sn{k} = jnp.sin(q{k})")
-            lines.append(f"cs{k} = jnp.cos(q{k})")
-            defined |= {f"sn{k}", f"cs{k}"}
+        # the sines and cosines of all the angles together, in one loop and one array each
+        # (gagen.jax.trig: XLA's own are calls per element, copied into every reader)
+        angles = [k for k in self.printer.trig_used(exprs) if f"sn{k}" not in defined]
+        if angles:
+            lines.append(f"{', '.join(f'sn{k}, cs{k}' for k in angles)}, = "
+                         f"_sincos(({', '.join(f'q{k}' for k in angles)},))")
+            defined |= {f"{kind}{k}" for k in angles for kind in ("sn", "cs")}
         # how many expressions of this body read each name: a value whose duplication into
         # its readers would cost more than DUPLICATED operations is divided by `unit` (1.0,
         # a value XLA cannot fold, from the first input), which makes it a producer XLA's
@@ -173,8 +183,17 @@ class _Writer:
             if a.symbol not in self.texts:
                 self.texts[a.symbol] = self.text(a.expr)
             text = _checked(self.texts[a.symbol], defined)
-            cost = int(sp.count_ops(a.expr)) + sum(
-                self.inlined.get(r, 0) for r in self.printer.reads(a.expr))
+            reads = self.printer.reads(a.expr)
+            if all(r in self.fixed for r in reads):
+                # a function of the parameters alone: a number where p is (the defaults), a
+                # value per batch where p is not batched; never an array of its own
+                self.fixed.add(name)
+                lines.append(f"{name} = {text}")
+                defined.add(name)
+                continue
+            # the angles' sines and cosines are arrays already (one read, no operation)
+            cost = int(sp.count_ops(a.expr)) - self.trig_count(a.expr) + sum(
+                self.inlined.get(r, 0) for r in reads)
             if (readers.get(name, 0) - 1) * cost > DUPLICATED:
                 text = f"({text}) / unit"
                 cost = 0
@@ -196,6 +215,7 @@ def _header(kind: str, ident: str) -> list[str]:
             "import jax.numpy as jnp",
             "",
             "from gagen.jax.linalg import stack as _stack",
+            "from gagen.jax.trig import sincos_stacked as _sincos",
             "from gagen.jax import linalg as _linalg",
             "",
             *(f"{name} = {value}" for name, value in FUNCTIONS.items()),
@@ -246,7 +266,7 @@ def print_main(eqs) -> str:
         # (gagen.jax.linalg)
         if tree is not None:
             w.lines += [f"PARENTS = {tuple(tree)!r}", ""]
-        solve = ("_linalg.solve_tree(M, F, PARENTS)" if tree is not None
+        solve = ("_linalg.solve_tree(M, F, PARENTS, 1.0 + 0.0 * q[..., 0])" if tree is not None
                  else "_linalg.solve_lower(M, F, PLAN)")
         w.function("_mass_forcing", ("q", "qd", "tau", "p"),
                    {"M": out["mass_matrix"], "F": out["forcing"]},
