@@ -486,6 +486,28 @@ def test_a_singular_mass_matrix_is_an_error_not_a_crash():
                                                     p=zero_masses))
 
 
+def test_a_big_batch_runs_on_xla_s_threads_and_reports_its_first_failing_state():
+    """A batch of many pieces (the shim splits it among XLA's CPU threads) gives the
+    stacked call's numbers, in float64 and in float32 (computed in double, rounded once),
+    and a failure names the batch's first failing state as a single loop would, whichever
+    thread met it first."""
+    dyn, f = model("panda"), functions("panda", "ffi")
+    q, qd, tau = state(dyn, 5, rows=3000)
+    fd = jax.jit(jax.vmap(f["forward_dynamics"]))
+    want = dyn.forward_dynamics(q, qd, tau)
+    np.testing.assert_array_equal(np.asarray(fd(q, qd, tau)), want)  # the same C, bit for bit
+    got32 = np.asarray(fd(*(np.asarray(x, np.float32) for x in (q, qd, tau))))
+    assert got32.dtype == np.float32
+    np.testing.assert_array_equal(got32, dyn.forward_dynamics(
+        *(np.asarray(x, np.float32).astype(np.float64) for x in (q, qd, tau))).astype(np.float32))
+    P = np.tile(dyn.parameter_vector(), (len(q), 1))
+    massless = [k for k, name in enumerate(dyn.parameters) if name.startswith(("m_", "I"))]
+    P[np.ix_([2999, 1700, 1234], massless)] = 0.0  # M singular at these states
+    with_p = jax.jit(jax.vmap(lambda a, b, c, pp: f["forward_dynamics"](a, b, c, p=pp)))
+    with pytest.raises(Exception, match=r"singular .* \(state 1234 of the batch\)"):
+        jax.block_until_ready(with_p(q, qd, tau, P))
+
+
 def test_the_shim_refuses_a_model_it_does_not_know():
     """A computation that names a slot with another key (compiled in another process, or a
     forged call) gets an error from the handler, not another model's kernels."""
