@@ -85,6 +85,16 @@ def rk4_with_sensitivities(dyn, x, u, h):
     return x1, S
 
 
+def assert_step(step: dict, x1, S, nv: int) -> None:
+    """acados' step (its status, x and sensitivities Sx, Su) against the reference: values
+    to 1e-12, sensitivities to 1e-10 of their scale."""
+    assert step["status"] == 0
+    np.testing.assert_allclose(step["x"], x1, rtol=1e-12, atol=1e-12)
+    scale = np.abs(S).max()
+    np.testing.assert_allclose(step["Sx"], S[:, :2 * nv], rtol=0, atol=1e-10 * scale)
+    np.testing.assert_allclose(step["Su"], S[:, 2 * nv:], rtol=0, atol=1e-10 * scale)
+
+
 def ipopt_reach(dyn, problem: dict) -> dict:
     """The reach of docs/acados_reach.py transcribed for casadi.Opti and IPOPT on gagen's
     CasADi forward dynamics: the reference optimum."""
@@ -150,12 +160,7 @@ def test_acados_erk_step_and_sensitivities_are_gagen_s(acados_run):
     dyn, _, problem, out = acados_run
     x0, u0 = np.array(problem["x0"]), np.array(problem["u0"])
     x1, S = rk4_with_sensitivities(dyn, x0, u0, H)
-    erk = out["ERK"]
-    assert erk["status"] == 0
-    np.testing.assert_allclose(erk["x"], x1, rtol=1e-12, atol=1e-12)
-    scale = np.abs(S).max()
-    np.testing.assert_allclose(erk["Sx"], S[:, :2 * dyn.nv], rtol=0, atol=1e-10 * scale)
-    np.testing.assert_allclose(erk["Su"], S[:, 2 * dyn.nv:], rtol=0, atol=1e-10 * scale)
+    assert_step(out["ERK"], x1, S, dyn.nv)
 
 
 def gauss_legendre_with_sensitivities(dyn, x, u, h):
@@ -192,12 +197,7 @@ def test_acados_irk_step_and_sensitivities_are_gagen_s(acados_run):
     dyn, _, problem, out = acados_run
     x1, S = gauss_legendre_with_sensitivities(dyn, np.array(problem["x0"]),
                                               np.array(problem["u0"]), H)
-    irk = out["IRK"]
-    assert irk["status"] == 0
-    np.testing.assert_allclose(irk["x"], x1, rtol=1e-12, atol=1e-12)
-    scale = np.abs(S).max()
-    np.testing.assert_allclose(irk["Sx"], S[:, :2 * dyn.nv], rtol=0, atol=1e-10 * scale)
-    np.testing.assert_allclose(irk["Su"], S[:, 2 * dyn.nv:], rtol=0, atol=1e-10 * scale)
+    assert_step(out["IRK"], x1, S, dyn.nv)
 
 
 def test_acados_code_calls_the_library_s_function_and_jacobian(acados_run):
