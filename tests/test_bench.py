@@ -105,6 +105,32 @@ def test_loop_is_sized_to_the_target():
     assert loop_size(timer, target=0.02) == 200
 
 
+def test_a_slow_first_call_does_not_size_the_loop():
+    clock = FakeClock()
+    timer = Candidate("a", clock.spend([0.5] + [1e-4] * 10_000)).timer(clock)
+    assert loop_size(timer, target=0.02) == 200
+
+
+def test_warmup_calls_are_timed_apart_from_the_samples():
+    clock = FakeClock()
+    log = []
+
+    def call(name, durations):
+        spend = clock.spend(durations)
+        return lambda: (log.append(name), spend())
+
+    a = Candidate("a", call("a", [9.0, 1.0, 1.0, 8.0, 3.0, 3.0]))
+    b = Candidate("b", call("b", [7.0, 2.0, 6.0, 2.0]))
+    ta, tb = interleaved([a, b], repeats=2, numbers=[2, 1], clock=clock, warmup=True)
+    assert "".join(log) == "aaabb" + "bbaaa"
+    assert ta.first == [9.0, 8.0] and ta.samples == [1.0, 3.0]
+    assert tb.first == [7.0, 6.0] and tb.samples == [2.0, 2.0]
+    assert ta.as_dict()["first_median_s"] == 8.5
+    (tc,) = interleaved([Candidate("c", clock.spend([1.0] * 2))], repeats=2, numbers=[1],
+                        clock=clock)
+    assert tc.first == [] and "first_median_s" not in tc.as_dict()
+
+
 def test_candidate_names_must_be_unique():
     with pytest.raises(ValueError):
         interleaved([Candidate("a", len, ("x",)), Candidate("a", len, ("y",))], numbers=[1, 1])

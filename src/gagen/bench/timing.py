@@ -48,6 +48,7 @@ class Timing:
     info: dict = field(default_factory=dict)
     baseline: str | None = None
     ratio: float | None = None  # median / the baseline's median
+    first: list[float] = field(default_factory=list)  # warm-up calls (interleaved(warmup=))
 
     @property
     def median(self) -> float:
@@ -74,7 +75,9 @@ class Timing:
         return {"name": self.name, "group": self.group, "median_s": self.median,
                 "q1_s": self.q1, "q3_s": self.q3, "iqr_s": self.iqr, "min_s": self.min,
                 "repeats": len(self.samples), "number": self.number,
-                "baseline": self.baseline, "ratio": self.ratio, **self.info}
+                "baseline": self.baseline, "ratio": self.ratio,
+                **({"first_median_s": quartiles(self.first)[1]} if self.first else {}),
+                **self.info}
 
 
 def quartiles(values: Sequence[float]) -> tuple[float, float, float]:
@@ -90,7 +93,12 @@ def quartiles(values: Sequence[float]) -> tuple[float, float, float]:
 
 def loop_size(timer: timeit.Timer, target: float, clock: Callable[[], float] | None = None
               ) -> int:
-    """Calls per sample so that one sample takes about `target` seconds (at least 1)."""
+    """Calls per sample so that one sample takes about `target` seconds (at least 1).
+
+    One untimed call first: a candidate's first call (its pages, caches, a JIT's lazy
+    set-up) would otherwise size the loop, and a call hundreds of times slower than the
+    next ones would leave every sample a single call."""
+    timer.timeit(1)
     number = 1
     while True:
         elapsed = timer.timeit(number)
@@ -110,8 +118,14 @@ def interleaved(candidates: Sequence[Candidate], repeats: int = DEFAULT_REPEATS,
                 target: float = DEFAULT_TARGET, baseline: str | Mapping | None = None,
                 numbers: Sequence[int] | None = None,
                 clock: Callable[[], float] = time.perf_counter,
-                progress: Callable[[int, int], None] | None = None) -> list[Timing]:
+                progress: Callable[[int, int], None] | None = None,
+                warmup: bool = False) -> list[Timing]:
     """Time the candidates round-robin; one `Timing` per candidate, in the given order.
+
+    `warmup`: each sample follows one call of its own candidate, timed apart (`Timing.first`),
+    so that samples measure a candidate's throughput in a run of calls and not its first
+    call after the others (whose data and allocations have displaced its own): for calls
+    of milliseconds, a sample is only a few calls long.
 
     `numbers` fixes the calls per sample (one per candidate); otherwise each candidate is
     warmed up and its loop sized so that one sample takes about `target` seconds.
@@ -129,13 +143,16 @@ def interleaved(candidates: Sequence[Candidate], repeats: int = DEFAULT_REPEATS,
     elif len(numbers) != len(candidates):
         raise ValueError("one loop size per candidate")
     samples: list[list[float]] = [[] for _ in candidates]
+    firsts: list[list[float]] = [[] for _ in candidates]
     for r, sequence in enumerate(order(len(candidates), max(1, repeats))):
         for i in sequence:
+            if warmup:
+                firsts[i].append(timers[i].timeit(1))
             samples[i].append(timers[i].timeit(numbers[i]) / numbers[i])
         if progress:
             progress(r + 1, repeats)
-    results = [Timing(c.name, c.group, s, n, dict(c.info))
-               for c, s, n in zip(candidates, samples, numbers)]
+    results = [Timing(c.name, c.group, s, n, dict(c.info), first=f)
+               for c, s, n, f in zip(candidates, samples, numbers, firsts)]
     apply_baseline(results, baseline)
     return results
 
