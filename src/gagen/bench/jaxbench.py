@@ -3,7 +3,9 @@ inside jax.jit(jax.vmap(...)), and the compile times of the printed functions.
 
 Per model (the Panda; the Panda's arm alone, its fingers fixed; ANYmal C on a floating
 base), every candidate checked against gagen's stacked call before anything is timed,
-all of them timed interleaved in one run (medians; the JAX calls wait for their results):
+all of them timed interleaved in one run (medians; the JAX calls wait for their results;
+each sample follows one untimed call of its candidate, reported as its first call; MJX in a
+run of its own after the others):
 
   forward dynamics   gagen's stacked call dyn.forward_dynamics(Q, QD, T) (NumPy; the
                      baseline), gagen.jax.functions(dyn)["forward_dynamics"] (the FFI:
@@ -389,6 +391,8 @@ def jax_rows(urdf_dir, scratch: Path, repeats: int, target: float, progress,
                  "the Panda arm (fingers fixed), where gagen runs as well.")
     cache_dir = cache_dir or scratch / "cache"
     cands: list[Candidate] = []
+    slow: list[Candidate] = []
+    shown: list[str] = []  # the table's order: per model, MJX after adam
     compile_rows: list[dict] = []
     for label, urdf, floating, peers in models:
         import warnings
@@ -404,9 +408,20 @@ def jax_rows(urdf_dir, scratch: Path, repeats: int, target: float, progress,
         if peers:
             progress(f"{label}: checking adam and MJX")
             cands += adam_candidates(label, dyn, urdf, Q, QD, T, notes)
-            cands += mjx_candidates(label, dyn, urdf, Q, QD, T, notes)
+            slow += mjx_candidates(label, dyn, urdf, Q, QD, T, notes)
+        shown += [c.name for c in cands + slow if c.name not in shown]
     progress(f"{len(cands)} candidates; timing {repeats} interleaved repeats")
     timings = interleaved(cands, repeats, target, warmup=True)
+    if slow:
+        # MJX apart: on the CPU its calls take seconds over arrays of hundreds of MB, and
+        # the call after one ran tens of times slower than the same call after gagen's or
+        # adam's, for several calls (gagen's FFI 22 against 1.5 ms, its steady calls 1.05
+        # against 0.68 ms on the Panda arm): interleaved with them it measured its own wake
+        notes.append("MuJoCo MJX is timed in an interleaved run of its own, after the others "
+                     "(its calls take seconds here and leave the caches cold for the next).")
+        progress(f"{len(slow)} MJX candidates; timing {repeats} interleaved repeats")
+        timings += interleaved(slow, repeats, target, warmup=True)
+        timings.sort(key=lambda t: shown.index(t.name))
     rows = [{"model": t.info["model"], "quantity": t.info["quantity"],
              "implementation": t.info["implementation"], "call": t.info["call"],
              "states": t.info["states"], "median_ms": t.median * 1e3, "q1_ms": t.q1 * 1e3,
