@@ -170,8 +170,8 @@ def main(argv=None) -> int:
     nominal = dyn.inverse_dynamics(held.q, held.qd, held.qdd)
     as_simulated = dyn.inverse_dynamics(held.q, held.qd, held.qdd, identified_p)
     moving = np.abs(held.qd) >= MIN_SPEED
-    table = ["| joint | noise σ | nominal model | identified (base parameters) | identified "
-             "(consistent, as parameters) | identified, moving |", "|---|--:|--:|--:|--:|--:|"]
+    table = [("| joint | noise σ | nominal model | identified (base parameters) | identified "
+              "(consistent, as parameters) | identified, moving |"), "|---|--:|--:|--:|--:|--:|"]
     for k, name in enumerate(names):
         error = identified[:, k] - exact[:, k]
         table.append(f"| {name} | {TORQUE_NOISE[k]:.3g} | {rms(nominal - exact)[k]:.3g} "
