@@ -133,9 +133,10 @@ def solve_tree(lower, F, parents, unit=1.0):
     gagen_cn_forward in their order. `parents`: per coordinate the one before it on its
     path to the world (-1: none).
 
-    `unit`: 1.0, as an array XLA cannot fold (the printed modules pass 1 + 0 q₀ per state:
-    the one number behind an optimization barrier that the printed programs divide by made
-    the Panda arm's solve 25% slower in XLA's loops, though ANYmal C's 8% faster). The
+    `unit`: 1.0, as an array XLA cannot fold (the printed modules pass one number behind an
+    optimization barrier where the tree branches, 1 + 0 q₀ per state along a chain: the
+    barrier made the Panda arm's solve 25% slower in XLA's loops, ANYmal C's and the
+    Panda's 8-13% faster; gagen.jax.printer._tree_unit). The
     factors' entries and the solves' entries, each read by several later steps, are
     divided by it, which keeps each in an array of its own (see gagen.jax.printer's
     DUPLICATED): left to XLA's fusion, the chains of updates behind them were copied into
