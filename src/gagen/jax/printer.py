@@ -179,7 +179,7 @@ class _Writer:
                 readers[r] = readers.get(r, 0) + 1
         if "unit" not in defined:
             first = next(a for a in _INPUTS if a in arguments)
-            lines.append(f"unit = _barrier(jnp.asarray(1.0, {first}.dtype))")
+            lines.append(f"unit = _linalg.kept({first}.dtype)")
             defined.add("unit")
         for a in assignments:
             name = self.names[a.symbol]
@@ -216,7 +216,6 @@ def _header(kind: str, ident: str) -> list[str]:
             "import math",
             "",
             "import jax.numpy as jnp",
-            "from jax.lax import optimization_barrier as _barrier",
             "",
             "from gagen.jax.linalg import stack as _stack",
             "from gagen.jax.trig import sincos_stacked as _sincos",
@@ -293,7 +292,7 @@ def _tree_unit(parents) -> str:
     runs: the barrier took ANYmal C from 0.975 to 0.852 µs per state and the Panda (its
     fingers branch) from 0.340 to 0.314, but the Panda arm (a chain) from 0.315 to 0.398."""
     chain = all(parent == k - 1 for k, parent in enumerate(parents))
-    return "1.0 + 0.0 * q[..., 0]" if chain else "_barrier(jnp.asarray(1.0, q.dtype))"
+    return "1.0 + 0.0 * q[..., 0]" if chain else "_linalg.kept(q.dtype)"
 
 
 def _regressor(eqs, eliminate: bool) -> list[str]:
