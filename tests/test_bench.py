@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -240,6 +241,18 @@ def test_urdf_dir_is_found_or_skipped_with_a_note(tmp_path):
 
 
 @pytest.mark.slow
+def test_a_section_gives_the_load_average_at_its_start_and_end():
+    results = synthetic_results()
+    results["percall"].update(elapsed_s=12.0, load=[0.5, 1.75])
+    results["batched"].update(elapsed_s=3.0, load=["=cmd()", 1.0])  # not numbers: left out
+    results["simulation"].update(elapsed_s=4.0)  # none recorded (a platform without one)
+    text = markdown(results)
+    assert ("_Section time: 12.0 s; the machine's 1-minute load average 0.5 at its start and "
+            "1.8 at its end._") in text
+    assert "_Section time: 3.0 s._" in text and "_Section time: 4.0 s._" in text
+    assert "=cmd()" not in text
+
+
 def test_bench_smoke_run_writes_the_report(tmp_path, cache_dir, capsys):
     out = tmp_path / "bench"
     assert main(["bench", "--out", str(out), "--smoke", "--cache-dir", str(cache_dir)]) == 0
@@ -277,6 +290,11 @@ def test_bench_smoke_run_writes_the_report(tmp_path, cache_dir, capsys):
     assert "## The derivatives per call" in text
     for png in ("percall.png", "batched.png", "simulation.png", "scaling.png"):
         assert (out / png).exists()
+    if hasattr(os, "getloadavg"):
+        for key in ("percall", "batched", "simulation", "throughput", "scaling", "derivatives"):
+            start, end = results[key]["load"]
+            assert 0 <= start < 1000 and 0 <= end < 1000, key
+        assert "1-minute load average" in text
 
 
 def test_scaling_table_shows_both_cpp_peers():

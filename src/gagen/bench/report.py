@@ -159,8 +159,17 @@ def _section(results: dict, key: str, title: str, intro: str, table, out: Path |
     if key in images:
         lines += [f"![{title}]({images[key]})", ""]
     if section.get("elapsed_s") is not None:
-        lines += [f"_Section time: {_duration(section['elapsed_s'])}._", ""]
+        lines += [f"_Section time: {_duration(section['elapsed_s'])}{_load(section)}._", ""]
     return lines
+
+
+def _load(section: dict) -> str:
+    """'; the load average ... at its start and ... at its end', where it was recorded."""
+    load = section.get("load")
+    if not load or len(load) != 2 or not all(isinstance(x, (int, float)) for x in load):
+        return ""
+    return (f"; the machine's 1-minute load average {float(load[0]):.1f} at its start and "
+            f"{float(load[1]):.1f} at its end")
 
 
 def markdown(results: dict, images: dict | None = None) -> str:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 import tempfile
 import time
@@ -495,6 +496,7 @@ class Bench:
                 self.results.setdefault("rrr_build", {})["setup_s"] = time.perf_counter() - start
             for key in self.settings.sections:
                 self.progress(titles[key], "start")
+                load = load_average()
                 start = time.perf_counter()
                 try:
                     section = getattr(self, key)()
@@ -505,6 +507,8 @@ class Bench:
                     self.results["notes"].append(f"Section {key} failed: {text}")
                     self.progress(titles[key], f"FAILED: {text}")
                 section["elapsed_s"] = time.perf_counter() - start
+                if load is not None:
+                    section["load"] = [load, load_average()]
                 self.results[key] = section
                 self.progress(titles[key], f"done in {section['elapsed_s']:.1f} s")
                 self.save()
@@ -517,6 +521,16 @@ class Bench:
         finally:
             shutil.rmtree(self.scratch, ignore_errors=True)
         return 1 if failed else 0
+
+
+def load_average() -> float | None:
+    """The 1-minute load average, where the platform has one: the report gives it at each
+    section's start and end, so a reader can tell a quiet run from a busy one (the machines
+    are shared; ratios move with the load)."""
+    try:
+        return round(os.getloadavg()[0], 2)
+    except (AttributeError, OSError):
+        return None
 
 
 def _short(name: str) -> str:
