@@ -39,7 +39,7 @@ def model(name: str):
                 warnings.simplefilter("ignore", gagen.InertiaWarning)
                 _cache[name] = gagen.load(ANYMAL, floating_base=True)
         else:
-            _cache[name] = gagen.load({"rrr": "rrr", "panda": PANDA}[name])
+            _cache[name] = gagen.load({"rrr": "rrr", "panda": PANDA, "chain:6": "chain:6"}[name])
     return _cache[name]
 
 
@@ -606,6 +606,28 @@ def test_xla_keeps_the_solves_of_the_printed_derivatives():
     ran, printed = _arithmetic(f["forward_dynamics_derivatives"], q, qd, tau)
     assert printed > 1000
     assert ran <= 1.5 * printed, (ran, printed)
+
+
+def test_xla_writes_a_chains_forward_dynamics_from_kept_values():
+    """Along a chain the tree solve divides by 1 + 0 q₀ (gagen.jax.printer._tree_unit): with
+    the optimization barrier's 1.0 instead, XLA fused the whole back substitution into the
+    loop that writes q̈, a concatenation that evaluates each entry's chain apart (the Panda
+    arm's printed forward dynamics 25 % slower). That loop reads the kept entries: 14
+    operations on chain:6, 171 with the barrier."""
+    from gagen.jax.printed import printed_module
+
+    dyn, f = model("chain:6"), functions("chain:6", "jax")
+    with open(printed_module(dyn, "dynamics").__file__) as file:
+        assert "_linalg.solve_tree(M, F, PARENTS, " in file.read()
+    q, qd, tau = state(dyn, 3, rows=8)
+    compiled = jax.jit(f["forward_dynamics"]).lower(q, qd, tau).compile().as_text()
+    entry = compiled[compiled.index("ENTRY"):]
+    root = re.search(r"ROOT \S+ = \S+ fusion\([^)]*\), kind=\w+, calls=%?([\w.\-]+)", entry)
+    assert root, "the result is not written by a fusion"
+    body = re.search(r"\n%?" + re.escape(root.group(1)) + r" [^\n]*\{\n(.*?)\n\}", compiled,
+                     re.DOTALL).group(1)
+    operations = len(re.findall(r" (multiply|add|subtract|divide|negate)\(", body))
+    assert operations <= 3 * dyn.nv, operations
 
 
 # --- the printed programs' sines and cosines (gagen.jax.trig) -------------------------------
