@@ -240,7 +240,6 @@ def test_urdf_dir_is_found_or_skipped_with_a_note(tmp_path):
     assert models == ["chain:2", "chain:4", "chain:6"] and "ur5_robot.urdf" in notes[0]
 
 
-@pytest.mark.slow
 def test_a_section_gives_the_load_average_at_its_start_and_end():
     results = synthetic_results()
     results["percall"].update(elapsed_s=12.0, load=[0.5, 1.75])
@@ -253,6 +252,7 @@ def test_a_section_gives_the_load_average_at_its_start_and_end():
     assert "=cmd()" not in text
 
 
+@pytest.mark.slow
 def test_bench_smoke_run_writes_the_report(tmp_path, cache_dir, capsys):
     out = tmp_path / "bench"
     assert main(["bench", "--out", str(out), "--smoke", "--cache-dir", str(cache_dir)]) == 0
