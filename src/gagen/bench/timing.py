@@ -71,12 +71,17 @@ class Timing:
     def min(self) -> float:
         return min(self.samples)
 
+    @property
+    def first_median(self) -> float:
+        """The median of the warm-up calls (interleaved(warmup=True))."""
+        return quartiles(self.first)[1]
+
     def as_dict(self) -> dict:
         return {"name": self.name, "group": self.group, "median_s": self.median,
                 "q1_s": self.q1, "q3_s": self.q3, "iqr_s": self.iqr, "min_s": self.min,
                 "repeats": len(self.samples), "number": self.number,
                 "baseline": self.baseline, "ratio": self.ratio,
-                **({"first_median_s": quartiles(self.first)[1]} if self.first else {}),
+                **({"first_median_s": self.first_median} if self.first else {}),
                 **self.info}
 
 
